@@ -1,0 +1,5 @@
+"""``python -m overbound`` runs the command line."""
+
+from overbound.cli import main
+
+main()

@@ -1,0 +1,168 @@
+"""The ``overbound analyze`` pipeline: read inputs, count KPIs, keep every intermediate."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import polars as pl
+
+from overbound.io.geodesy import Reference
+from overbound.io.open import Source, read, source_name
+from overbound.io.schema import InputError, ReadReport, validate_epochs
+from overbound.methods.counting import CountingResult, count_kpis
+from overbound.services import ServiceLevel, resolve_services
+
+__all__ = ["Analysis", "Verdict", "analyze", "load_epochs", "verdicts"]
+
+
+@dataclass(frozen=True, slots=True)
+class Analysis:
+    """Result of :func:`analyze`.
+
+    Attributes
+    ----------
+    table : the pooled epoch table of all inputs (sorted by station, then time).
+    reports : one :class:`~overbound.io.schema.ReadReport` per input.
+    services : the service levels analysed.
+    counting : the counting KPIs.
+    title : a label for the report (the inputs' names).
+    """
+
+    table: pl.DataFrame
+    reports: tuple[ReadReport, ...]
+    services: tuple[ServiceLevel, ...]
+    counting: CountingResult
+    title: str
+
+    @property
+    def n_rejected(self) -> int:
+        return sum(r.n_rejected for r in self.reports)
+
+
+def load_epochs(
+    inputs: Sequence[Source],
+    *,
+    format: str | None = None,
+    reference: Reference | None = None,
+    station: str | None = None,
+    strict: bool = False,
+    progress: Callable[[str], None] | None = None,
+) -> tuple[pl.DataFrame, tuple[ReadReport, ...]]:
+    """Read and pool several inputs into one epoch table.
+
+    Inputs of the same station must not overlap in time: the pooled table is sorted by
+    station and time and checked by :func:`~overbound.io.schema.validate_epochs`, which
+    raises on duplicate epochs across files.
+    """
+    if not inputs:
+        raise InputError("<inputs>", "no input files given")
+    tables, reports = [], []
+    for src in inputs:
+        if progress:
+            progress(source_name(src))
+        t, r = read(src, format=format, reference=reference, station=station, strict=strict)
+        tables.append(t)
+        reports.append(r)
+    table = pl.concat(tables, how="diagonal_relaxed") if len(tables) > 1 else tables[0]
+    if len(tables) > 1:
+        table = table.sort(["station", "time"], maintain_order=True)
+    name = ", ".join(source_name(s) for s in inputs) if len(inputs) > 1 else source_name(inputs[0])
+    return validate_epochs(table, name), tuple(reports)
+
+
+def analyze(
+    inputs: Sequence[Source] | pl.DataFrame,
+    *,
+    services: Sequence[str] | Sequence[ServiceLevel] | None = None,
+    format: str | None = None,
+    reference: Reference | None = None,
+    station: str | None = None,
+    strict: bool = False,
+    title: str | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> Analysis:
+    """Read ``inputs`` (or take an epoch table) and count the KPIs for each service.
+
+    ``services`` are names, ``NAME:HAL:VAL`` strings or :class:`ServiceLevel`;
+    all built-in levels when ``None``.
+    """
+    if isinstance(inputs, pl.DataFrame):
+        table, reports = validate_epochs(inputs), ()
+        label = title or "epoch table"
+    else:
+        table, reports = load_epochs(
+            inputs, format=format, reference=reference, station=station, strict=strict, progress=progress
+        )
+        label = title or ", ".join(source_name(s) for s in inputs)
+    levels = _levels(services)
+    if progress:
+        progress("counting KPIs")
+    return Analysis(table, reports, levels, count_kpis(table, levels), label)
+
+
+def _levels(services: Sequence[str] | Sequence[ServiceLevel] | None) -> tuple[ServiceLevel, ...]:
+    if services and all(isinstance(s, ServiceLevel) for s in services):
+        return tuple(services)  # type: ignore[arg-type]
+    return resolve_services([str(s) for s in services] if services else None)
+
+
+@dataclass(frozen=True, slots=True)
+class Verdict:
+    """One KPI against its requirement.
+
+    ``passed`` is ``None`` when the value could not be computed (e.g. continuity at
+    30 s sampling) or the service states no requirement for it.
+    """
+
+    kpi: str
+    value: float | int | None
+    required: float | int | None
+    comparison: str
+    passed: bool | None
+    note: str = ""
+
+
+def verdicts(analysis: Analysis, service: ServiceLevel) -> tuple[Verdict, ...]:
+    """The service's counting KPIs against its requirements.
+
+    The integrity verdict here is only the counted one (no HMI epoch observed): a
+    count can never show 2e-7 per approach; the statistical methods do that.
+    """
+    c = analysis.counting
+    k = c.services[service.name]
+    out = [
+        _check("availability (combined)", k.combined.availability, service.availability, ">="),
+        _check(
+            "continuity risk (combined)",
+            k.combined.continuity.risk if k.combined.continuity else None,
+            service.continuity_risk,
+            "<=",
+            k.combined.continuity.reason if k.combined.continuity else "",
+        ),
+        _check("HPE95 (m)", c.hpe95, service.accuracy_h95, "<="),
+    ]
+    if service.val is not None:
+        out.append(_check("|VPE|95 (m)", c.vpe95, service.accuracy_v95, "<="))
+    hmi = k.horizontal.stanford.hmi + (k.vertical.stanford.hmi if k.vertical.stanford else 0)
+    out.append(
+        Verdict(
+            "HMI epochs (counted)",
+            hmi,
+            0,
+            "<=",
+            hmi == 0,
+            f"requirement {service.integrity_risk:g} per {service.integrity_exposure_s:g} s needs the "
+            "statistical methods; a count only shows whether HMI was observed",
+        )
+    )
+    return tuple(out)
+
+
+def _check(kpi: str, value: float | None, required: float | None, cmp: str, note: str = "") -> Verdict:
+    if value is None or required is None:
+        return Verdict(
+            kpi, value, required, cmp, None, note or ("no requirement" if required is None else "")
+        )
+    ok = value >= required if cmp == ">=" else value <= required
+    return Verdict(kpi, value, required, cmp, bool(ok), note)

@@ -1,0 +1,387 @@
+"""The ``overbound`` command line: parses arguments and calls public functions only."""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+import tempfile
+from collections.abc import Iterator
+from importlib.resources import as_file, files
+from pathlib import Path
+
+import click
+from rich.console import Console
+from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from overbound import __version__
+from overbound.io.geodesy import Reference
+from overbound.io.open import FORMATS
+from overbound.io.schema import InputError
+
+__all__ = ["main"]
+
+console = Console(stderr=True)
+#: Monument of UNAVCO station USLO (RINEX header comment), truth for the embedded demo data.
+USLO_REFERENCE = "35.311803,-120.661092,134.6419"
+DEMO_POS = "uslo-2006-361-waas.pos.gz"
+
+
+@contextlib.contextmanager
+def _progress() -> Iterator[Progress]:
+    with Progress(
+        SpinnerColumn(),
+        TextColumn("{task.description}"),
+        BarColumn(),
+        TimeElapsedColumn(),
+        console=console,
+        transient=True,
+        disable=not console.is_terminal,
+    ) as bar:
+        yield bar
+
+
+def _reference(lla: str | None, ecef: str | None) -> Reference | None:
+    if lla and ecef:
+        raise click.UsageError("give --reference or --reference-ecef, not both")
+    try:
+        if lla:
+            return Reference.parse(lla)
+        if ecef:
+            return Reference.parse_ecef(ecef)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc)) from None
+    return None
+
+
+class _Group(click.Group):
+    """Turns input errors into one clean line and exit status 2."""
+
+    def invoke(self, ctx: click.Context):
+        try:
+            return super().invoke(ctx)
+        except (InputError, ValueError) as exc:
+            console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
+            sys.exit(2)
+
+
+@click.group(cls=_Group)
+@click.version_option(__version__, prog_name="overbound")
+def main() -> None:
+    """GNSS integrity verification: availability, continuity, Stanford diagrams and MI statistics."""
+
+
+_reference_options = [
+    click.option(
+        "--reference",
+        "reference",
+        metavar="LAT,LON,H",
+        help="True antenna position, geodetic WGS-84 (deg, deg, ellipsoidal m).",
+    ),
+    click.option(
+        "--reference-ecef", "reference_ecef", metavar="X,Y,Z", help="True antenna position, ECEF (m)."
+    ),
+]
+
+
+def _with_reference(f):
+    for opt in reversed(_reference_options):
+        f = opt(f)
+    return f
+
+
+@main.command()
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "-o",
+    "--output",
+    "out_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Output directory for summary.json and report.html.",
+)
+@click.option(
+    "--service",
+    "services",
+    multiple=True,
+    metavar="NAME|NAME:HAL:VAL",
+    help="Service level (repeatable); default: all of NPA, APV-I, APV-II, LPV, LPV-200, CAT-I.",
+)
+@_with_reference
+@click.option("--format", "fmt", type=click.Choice(FORMATS), help="Force the input format (default: detect).")
+@click.option("--station", help="Station name (default: from the input).")
+@click.option("--strict", is_flag=True, help="Stop at the first malformed row instead of counting it.")
+@click.option(
+    "--epochs",
+    "epochs_out",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Also write the pooled epoch table (.parquet or .csv).",
+)
+def analyze(inputs, out_dir, services, reference, reference_ecef, fmt, station, strict, epochs_out) -> None:
+    """Analyse receiver output INPUTS: write OUTPUT/summary.json and OUTPUT/report.html."""
+    ref = _reference(reference, reference_ecef)
+    paths = _run_analysis(
+        list(inputs),
+        out_dir,
+        services=services,
+        reference=ref,
+        fmt=fmt,
+        station=station,
+        strict=strict,
+        epochs_out=epochs_out,
+    )
+    click.echo(f"report: {paths[1]}")
+    click.echo(f"summary: {paths[0]}")
+
+
+def _run_analysis(
+    inputs,
+    out_dir: Path,
+    *,
+    services=(),
+    reference=None,
+    fmt=None,
+    station=None,
+    strict=False,
+    epochs_out=None,
+    title=None,
+) -> tuple[Path, Path]:
+    from overbound.analysis import analyze as run
+    from overbound.io.table import write_epochs
+    from overbound.report.html import write_report
+    from overbound.report.json import summary_dict, write_summary
+
+    with _progress() as bar:
+        task = bar.add_task("reading", total=len(inputs) + 3)
+
+        def step(what: str) -> None:
+            bar.update(task, description=f"{what}", advance=1)
+
+        result = run(
+            inputs,
+            services=list(services) or None,
+            format=fmt,
+            reference=reference,
+            station=station,
+            strict=strict,
+            title=title,
+            progress=step,
+        )
+        out_dir.mkdir(parents=True, exist_ok=True)
+        step("writing summary.json")
+        summary = write_summary(result, out_dir / "summary.json")
+        step("drawing report.html")
+        report = write_report(result, out_dir, summary=summary_dict(result))
+        if epochs_out:
+            write_epochs(result.table, epochs_out)
+    _print_summary(result)
+    return summary, report
+
+
+def _fmt(x: float | None, pct: bool = False) -> str:
+    if x is None:
+        return "n/a"
+    return f"{100 * x:.3f} %" if pct else f"{x:.3g}"
+
+
+def _print_summary(result) -> None:
+    c = result.counting
+    rejected = sum(r.n_rejected for r in result.reports)
+    console.print(
+        f"[bold]{result.title}[/]: {c.n_total} epochs, {c.n_with_solution} with solution, "
+        f"{rejected} rejected; "
+        f"HPE95 {_fmt(c.hpe95)} m, |VPE|95 {_fmt(c.vpe95)} m",
+        highlight=False,
+    )
+    t = Table(
+        "service", "HAL/VAL", "avail. H", "avail. V", "avail. H+V", "cont. risk H+V", "MI H/V", "HMI H/V"
+    )
+    for name, k in c.services.items():
+        s = k.service
+        v = k.vertical.stanford
+        t.add_row(
+            name,
+            f"{s.hal:g}/{'-' if s.val is None else f'{s.val:g}'}",
+            _fmt(k.horizontal.availability, True),
+            _fmt(k.vertical.availability, True),
+            _fmt(k.combined.availability, True),
+            _fmt(k.combined.continuity.risk if k.combined.continuity else None),
+            f"{k.horizontal.stanford.mi}/{v.mi if v else '-'}",
+            f"{k.horizontal.stanford.hmi}/{v.hmi if v else '-'}",
+        )
+    console.print(t)
+
+
+@main.command()
+@click.option(
+    "-o",
+    "--output",
+    "out",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Output epoch table (.parquet or .csv).",
+)
+@click.option("--days", default=7.0, show_default=True, type=click.FloatRange(min=0, min_open=True))
+@click.option("--seed", default=0, show_default=True, type=int)
+@click.option(
+    "--interval",
+    "interval_s",
+    default=1.0,
+    show_default=True,
+    type=click.FloatRange(min=0, min_open=True),
+    help="Sampling interval (s).",
+)
+@click.option("--stations", default=1, show_default=True, type=click.IntRange(min=1))
+@click.option(
+    "--sigma-ratio",
+    default=None,
+    type=float,
+    help="Error sigma relative to PL/K: <1 overbounded, >1 violated.",
+)
+@click.option("--correlation", "correlation_s", default=None, type=float, help="Error correlation time (s).")
+@click.option("--tail-fraction", default=None, type=float, help="Share of epochs in the heavy-tail regime.")
+@click.option(
+    "--tail-scale", default=None, type=float, help="Error sigma multiplier in the heavy-tail regime."
+)
+@click.option(
+    "--anomaly",
+    "anomalies",
+    multiple=True,
+    metavar="band:LO:HI:FACTOR[:AXIS] | bias:START_H:DURATION_S:METRES[:AXIS] | outage:START_H:DURATION_S",
+    help="Inject an anomaly (repeatable).",
+)
+def simulate(
+    out, days, seed, interval_s, stations, sigma_ratio, correlation_s, tail_fraction, tail_scale, anomalies
+) -> None:
+    """Simulate a receiver campaign with known truth and write its epoch table."""
+    from overbound.simulate import SimulationConfig, parse_anomaly, write_simulation
+    from overbound.simulate import simulate as run
+
+    options = {
+        "sigma_ratio": sigma_ratio,
+        "correlation_s": correlation_s,
+        "tail_fraction": tail_fraction,
+        "tail_scale": tail_scale,
+    }
+    config = SimulationConfig(
+        days=days,
+        seed=seed,
+        interval_s=interval_s,
+        stations=stations,
+        anomalies=tuple(parse_anomaly(a) for a in anomalies),
+        **{k: v for k, v in options.items() if v is not None},
+    )
+    with _progress() as bar:
+        bar.add_task(f"simulating {days:g} days", total=None)
+        sim = run(config)
+        write_simulation(sim, out)
+    click.echo(
+        f"{out}: {sim.table.height} epochs; true P(|VPE|>VPL) per epoch {sim.p_mi_true('vertical'):.3e}, "
+        f"true P(HPE>HPL) {sim.p_mi_true('horizontal'):.3e}"
+    )
+
+
+@main.command()
+@click.argument("source", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "-o",
+    "--output",
+    "out",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Epoch table to write (.parquet or .csv).",
+)
+@_with_reference
+@click.option("--format", "fmt", type=click.Choice(FORMATS), help="Force the input format (default: detect).")
+@click.option("--station", help="Station name (default: from the input).")
+@click.option("--strict", is_flag=True, help="Stop at the first malformed row instead of counting it.")
+def convert(source, out, reference, reference_ecef, fmt, station, strict) -> None:
+    """Read SOURCE in any supported format and write it as an epoch table."""
+    from overbound.io.open import read
+    from overbound.io.table import write_epochs
+
+    table, report = read(
+        source, format=fmt, reference=_reference(reference, reference_ecef), station=station, strict=strict
+    )
+    write_epochs(table, out, report=report)
+    click.echo(
+        f"{out}: {report.rows_kept} epochs from {report.rows_read} rows ({report.format}); "
+        f"rejected {report.n_rejected} {dict(sorted(report.rejected.items()))}; "
+        f"invalidated {sum(report.invalidated.values())} {dict(sorted(report.invalidated.items()))}"
+    )
+
+
+@main.command()
+@click.option(
+    "-o",
+    "--output",
+    "out_dir",
+    default=Path("overbound-demo"),
+    show_default=True,
+    type=click.Path(file_okay=False, path_type=Path),
+)
+@click.option(
+    "--days",
+    default=7.0,
+    show_default=True,
+    type=click.FloatRange(min=0, min_open=True),
+    help="Length of the simulated campaign.",
+)
+@click.option("--seed", default=2, show_default=True, type=int)
+def demo(out_dir, days, seed) -> None:
+    """Analyse the embedded real WAAS day (USLO, 2006-12-27) and a simulated campaign."""
+    from overbound.io.geodesy import Reference
+    from overbound.simulate import SimulationConfig, write_simulation
+    from overbound.simulate import simulate as run
+
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with as_file(files("overbound.data") / DEMO_POS) as pos:
+        real = _run_analysis(
+            [pos],
+            out_dir / "uslo",
+            reference=Reference.parse(USLO_REFERENCE),
+            title="USLO 2006-12-27, WAAS (RTKLIB-MOPS output)",
+        )
+    with tempfile.TemporaryDirectory() as tmp:
+        with _progress() as bar:
+            bar.add_task(f"simulating {days:g} days at 1 Hz", total=None)
+            sim = run(SimulationConfig(days=days, seed=seed))
+            path = Path(tmp) / "simulated.parquet"
+            write_simulation(sim, path)
+        simulated = _run_analysis(
+            [path], out_dir / "simulated", title=f"Simulated {days:g}-day 1 Hz campaign"
+        )
+    index = _write_index(
+        out_dir, [("USLO real WAAS day", real[1]), (f"Simulated {days:g} days", simulated[1])]
+    )
+    click.echo(f"report: {real[1]}")
+    click.echo(f"report: {simulated[1]}")
+    click.echo(f"index:  {index}")
+
+
+def _write_index(out_dir: Path, reports: list[tuple[str, Path]]) -> Path:
+    import html
+
+    items = "\n".join(
+        f'<li><a href="{html.escape(p.relative_to(out_dir).as_posix())}">{html.escape(name)}</a></li>'
+        for name, p in reports
+    )
+    path = out_dir / "index.html"
+    path.write_text(
+        f"<!doctype html><html lang=en><meta charset=utf-8><title>overbound demo</title>"
+        f"<h1>overbound demo</h1><ul>\n{items}\n</ul></html>\n",
+        encoding="utf-8",
+    )
+    return path
+
+
+@main.command()
+def schema() -> None:
+    """Print the epoch table's columns (Markdown)."""
+    from overbound.io.schema import schema_markdown
+
+    click.echo(schema_markdown())
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()

@@ -1,0 +1,1 @@
+"""Embedded data files (see PROVENANCE.md)."""

@@ -1,0 +1,148 @@
+"""Shared reader machinery: row checks that every format applies the same way."""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+import polars as pl
+
+from overbound.io.schema import COLUMNS, InputError, ReadReport
+
+_DTYPES = {c.name: c.dtype for c in COLUMNS}
+_SOLUTION = ("hpe", "vpe", "hpl", "vpl", "east", "north")
+
+
+@dataclass
+class RowLog:
+    """Accumulates rejected rows while a reader parses; turns into a :class:`ReadReport`."""
+
+    source: str
+    strict: bool = False
+    rows_read: int = 0
+    rejected: Counter = field(default_factory=Counter)
+    first_bad: str = ""
+    first_line: int = 0
+
+    def reject(self, line: int, reason: str) -> None:
+        """Count one rejected row; with ``strict`` raise instead."""
+        if self.strict:
+            raise InputError(self.source, reason, line=line)
+        self.rejected[_reason_key(reason)] += 1
+        self._first(line, reason)
+
+    def _first(self, line: int, reason: str) -> None:
+        if not self.first_bad or line < self.first_line:
+            self.first_bad, self.first_line = f"{line}: {reason}", line
+
+
+def _reason_key(reason: str) -> str:
+    """Counter key of a reason: its text before the first colon (details vary row by row)."""
+    return reason.split(":", 1)[0].strip().replace(" ", "_")
+
+
+def finalize_epochs(
+    df: pl.DataFrame,
+    log: RowLog,
+    *,
+    format: str,
+    notes: tuple[str, ...] = (),
+) -> tuple[pl.DataFrame, ReadReport]:
+    """Apply the row rules common to all readers and build the report.
+
+    ``df`` holds canonical columns plus ``_line`` (1-based source line of each row),
+    in file order.
+
+    Rules, in order:
+
+    1. A time earlier than the previous row of the same station raises
+       :class:`InputError` naming the line: the file order is broken and no row-wise
+       repair is defensible.
+    2. A row whose time equals the previous row's (same station) is rejected and
+       counted as ``duplicate_time``; the first occurrence is kept.
+    3. A NaN or negative protection level, or a NaN error beside a finite PL, makes the
+       epoch a no-solution epoch (all errors and PLs NaN), counted under
+       ``invalidated`` as ``nan_pl``, ``negative_pl`` or ``nan_error``.
+       Rows whose errors *and* PLs are all NaN are no-solution epochs already and are
+       not counted.
+    """
+    df = _drop_duplicates_or_raise(df, log)
+    df, invalid = _invalidate(df, log)
+    cols = [c.name for c in COLUMNS if c.name in df.columns]
+    out = df.select([pl.col(c).cast(_DTYPES[c]) for c in cols])
+    report = ReadReport(
+        source=log.source,
+        format=format,
+        rows_read=log.rows_read,
+        rows_kept=out.height,
+        rejected=dict(log.rejected),
+        invalidated=invalid,
+        first_bad=log.first_bad,
+        notes=notes,
+    )
+    return out, report
+
+
+def _drop_duplicates_or_raise(df: pl.DataFrame, log: RowLog) -> pl.DataFrame:
+    if df.height < 2:
+        return df
+    t = df["time"].dt.epoch("us").to_numpy()
+    st = df["station"].cast(pl.String).to_numpy()
+    same = np.concatenate([[False], st[1:] == st[:-1]])
+    dt = np.concatenate([[1], np.diff(t)])
+    back = np.flatnonzero(same & (dt < 0))
+    if back.size:
+        i = int(back[0])
+        raise InputError(
+            log.source,
+            f"backward time {df['time'][i]} after {df['time'][i - 1]} (station {st[i]})",
+            line=int(df["_line"][i]),
+        )
+    # A duplicate is a row whose time equals the last *kept* row's time; with no
+    # backward steps that is simply dt == 0 against the previous row.
+    dup = np.flatnonzero(same & (dt == 0))
+    for i in dup[:1]:
+        log.reject(
+            int(df["_line"][i]), f"duplicate time: {df['time'][i]} repeats line {int(df['_line'][i - 1])}"
+        )
+    if dup.size > 1:
+        log.rejected["duplicate_time"] += dup.size - 1
+    keep = np.ones(df.height, dtype=bool)
+    keep[dup] = False
+    return df.filter(pl.Series(keep)) if dup.size else df
+
+
+def _invalidate(df: pl.DataFrame, log: RowLog) -> tuple[pl.DataFrame, dict[str, int]]:
+    pl_cols = [pl.col("hpl"), pl.col("vpl")]
+    err_cols = [pl.col(c) for c in ("hpe", "vpe")]
+    all_nan = pl.all_horizontal([c.is_nan() | c.is_null() for c in pl_cols + err_cols])
+    neg = pl.any_horizontal([c < 0 for c in pl_cols])
+    nan_pl = pl.any_horizontal([c.is_nan() | c.is_null() for c in pl_cols])
+    nan_err = pl.any_horizontal([c.is_nan() | c.is_null() for c in err_cols])
+    reason = (
+        pl.when(all_nan)
+        .then(pl.lit(None, pl.String))
+        .when(neg)
+        .then(pl.lit("negative_pl"))
+        .when(nan_pl)
+        .then(pl.lit("nan_pl"))
+        .when(nan_err)
+        .then(pl.lit("nan_error"))
+        .otherwise(pl.lit(None, pl.String))
+    )
+    df = df.with_columns(reason.alias("_invalid"))
+    bad = df.filter(pl.col("_invalid").is_not_null())
+    if bad.height == 0:
+        return df.drop("_invalid"), {}
+    counts = dict(bad.group_by("_invalid").len().sort("_invalid").iter_rows())
+    log._first(int(bad["_line"][0]), f"{bad['_invalid'][0]}: solution set to no-solution")
+    nan = pl.lit(float("nan"))
+    df = df.with_columns(
+        [
+            pl.when(pl.col("_invalid").is_not_null()).then(nan).otherwise(pl.col(c)).alias(c)
+            for c in _SOLUTION
+            if c in df.columns
+        ]
+    ).drop("_invalid")
+    return df, counts

@@ -1,0 +1,98 @@
+"""The true antenna position and position errors in its local east-north-up frame.
+
+Conversions use :mod:`pymap3d` on the WGS-84 ellipsoid (NIMA TR8350.2), vectorised.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pymap3d
+
+__all__ = ["Reference", "enu_errors_ecef", "enu_errors_geodetic"]
+
+
+@dataclass(frozen=True, slots=True)
+class Reference:
+    """True antenna position, geodetic WGS-84 (degrees, degrees, ellipsoidal metres)."""
+
+    lat_deg: float
+    lon_deg: float
+    height_m: float
+
+    @classmethod
+    def parse(cls, text: str) -> Reference:
+        """From ``"lat,lon,h"`` (degrees, degrees, metres).
+
+        >>> Reference.parse("35.311803,-120.661092,134.6419").height_m
+        134.6419
+        """
+        lat, lon, h = _three_floats(text, "lat,lon,h")
+        if not -90 <= lat <= 90 or not -180 <= lon <= 360:
+            raise ValueError(
+                f"reference {text!r}: latitude must be in [-90, 90] and longitude in [-180, 360]"
+            )
+        return cls(lat, lon, h)
+
+    @classmethod
+    def parse_ecef(cls, text: str) -> Reference:
+        """From ``"x,y,z"`` ECEF metres.
+
+        >>> r = Reference.parse_ecef("-2657201.1481,-4482167.4171,3666227.1204")
+        >>> round(r.lat_deg, 4), round(r.lon_deg, 4)
+        (35.3118, -120.6611)
+        """
+        x, y, z = _three_floats(text, "x,y,z")
+        if np.hypot(np.hypot(x, y), z) < 6.0e6:
+            raise ValueError(f"reference-ecef {text!r}: not an ECEF position (norm below 6000 km)")
+        lat, lon, h = pymap3d.ecef2geodetic(x, y, z)
+        return cls(float(lat), float(lon), float(h))
+
+    def to_ecef(self) -> tuple[float, float, float]:
+        x, y, z = pymap3d.geodetic2ecef(self.lat_deg, self.lon_deg, self.height_m)
+        return float(x), float(y), float(z)
+
+    def __str__(self) -> str:
+        return f"{self.lat_deg:.9f},{self.lon_deg:.9f},{self.height_m:.4f}"
+
+
+def _three_floats(text: str, what: str) -> tuple[float, float, float]:
+    parts = text.replace(" ", "").split(",")
+    try:
+        if len(parts) != 3:
+            raise ValueError
+        a, b, c = (float(p) for p in parts)
+    except ValueError:
+        raise ValueError(f"reference {text!r}: expected {what}") from None
+    return a, b, c
+
+
+def enu_errors_geodetic(
+    lat_deg: np.ndarray, lon_deg: np.ndarray, height_m: np.ndarray, ref: Reference
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """East, north, up errors (estimate minus truth) of geodetic positions."""
+    e, n, u = pymap3d.geodetic2enu(
+        np.asarray(lat_deg, float),
+        np.asarray(lon_deg, float),
+        np.asarray(height_m, float),
+        ref.lat_deg,
+        ref.lon_deg,
+        ref.height_m,
+    )
+    return np.asarray(e, float), np.asarray(n, float), np.asarray(u, float)
+
+
+def enu_errors_ecef(
+    x: np.ndarray, y: np.ndarray, z: np.ndarray, ref: Reference
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """East, north, up errors (estimate minus truth) of ECEF positions."""
+    e, n, u = pymap3d.ecef2enu(
+        np.asarray(x, float),
+        np.asarray(y, float),
+        np.asarray(z, float),
+        ref.lat_deg,
+        ref.lon_deg,
+        ref.height_m,
+    )
+    return np.asarray(e, float), np.asarray(n, float), np.asarray(u, float)

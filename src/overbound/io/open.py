@@ -1,0 +1,198 @@
+"""One entry point for every input: sniff the format, dispatch to its reader.
+
+Detection is by content first (magic bytes, then the first meaningful lines) and by
+suffix only as a tie-breaker, so a renamed file still reads; ``format=`` overrides it.
+Gzip-compressed inputs are decompressed transparently.
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import gzip
+import io
+import re
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import BinaryIO, TextIO
+
+import polars as pl
+
+from overbound.io.geodesy import Reference
+from overbound.io.schema import InputError, ReadReport
+
+__all__ = ["FORMATS", "Source", "open_binary", "open_text", "read", "sniff", "source_name"]
+
+Source = str | Path | TextIO | BinaryIO
+
+#: Format names accepted by ``format=`` / ``--format``.
+FORMATS: tuple[str, ...] = ("parquet", "csv", "rtklib-pos", "glab", "ubx")
+
+_GZIP = b"\x1f\x8b"
+_RTKLIB_DATA = re.compile(rb"^\s*\d{4}/\d{2}/\d{2}\s+\d{2}:\d{2}:\d{2}(\.\d+)?\s")
+_RTKLIB_WEEK = re.compile(rb"^\s*\d{3,4}\s+\d+(\.\d+)?\s+-?\d")
+
+
+def source_name(source: Source) -> str:
+    """A printable name for a path or stream (``<stream>`` when it has none)."""
+    if isinstance(source, str | Path):
+        return str(source)
+    return str(getattr(source, "name", "<stream>"))
+
+
+def open_binary(source: Source) -> BinaryIO:
+    """A binary stream over ``source``, gunzipped when it starts with the gzip magic."""
+    if isinstance(source, str | Path):
+        path = Path(source)
+        if not path.exists():
+            raise InputError(str(path), "no such file")
+        if path.is_dir():
+            raise InputError(str(path), "is a directory, expected a file")
+        raw: BinaryIO = path.open("rb")
+    elif isinstance(source, io.TextIOBase):
+        raw = io.BytesIO(source.read().encode())
+    else:
+        raw = source  # type: ignore[assignment]
+    head = raw.read(2)
+    raw.seek(0)
+    if head == _GZIP:
+        return gzip.GzipFile(fileobj=raw)  # type: ignore[return-value]
+    return raw
+
+
+def open_text(source: Source) -> TextIO:
+    """A text stream over ``source`` (gunzipped if needed); undecodable bytes become U+FFFD."""
+    if isinstance(source, io.TextIOBase):
+        return source  # type: ignore[return-value]
+    return io.TextIOWrapper(open_binary(source), encoding="utf-8", errors="replace", newline=None)
+
+
+def _head(source: Source, n: int = 8192) -> bytes:
+    if isinstance(source, io.TextIOBase):
+        pos = source.tell()
+        text = source.read(n)
+        source.seek(pos)
+        return text.encode()
+    stream = open_binary(source)
+    try:
+        return stream.read(n)
+    finally:
+        if isinstance(source, str | Path):
+            stream.close()
+        else:
+            stream.seek(0)
+            if hasattr(source, "seek"):
+                source.seek(0)  # type: ignore[union-attr]
+
+
+def sniff(source: Source) -> str:
+    """The format of ``source``, one of :data:`FORMATS`.
+
+    Raises
+    ------
+    InputError
+        Nothing recognisable in the first 8 KiB.
+    """
+    head = _head(source)
+    name = source_name(source)
+    if head.startswith(b"PAR1"):
+        return "parquet"
+    if _looks_ubx(head):
+        return "ubx"
+    lines = [ln for ln in head.splitlines()[:200] if ln.strip()]
+    if any(
+        ln.startswith((b"SBASOUT", b"SBASIONO", b"SBASCORR", b"SBASVAR", b"SBASUNSEL")) for ln in lines
+    ) or any(b"gLAB" in ln and ln.startswith(b"INFO") for ln in lines):
+        return "glab"
+    if any(ln.startswith(b"%") and (b"RTKLIB" in ln or b"GPST" in ln or b"UTC" in ln) for ln in lines) or any(
+        _RTKLIB_DATA.match(ln) for ln in lines[:50]
+    ):
+        return "rtklib-pos"
+    first = lines[0] if lines else b""
+    if (b"," in first or b";" in first or b"\t" in first) and re.search(rb"[A-Za-z_]", first):
+        return "csv"
+    if name.lower().endswith((".parquet", ".pq")):
+        return "parquet"
+    raise InputError(name, f"unknown format (not {', '.join(FORMATS)}); use --format to force one")
+
+
+def _looks_ubx(head: bytes) -> bool:
+    """UBX frames: sync 0xB5 0x62, class, id, little-endian length; at least two in a row."""
+    i = head.find(b"\xb5\x62")
+    hits = 0
+    while 0 <= i and i + 6 <= len(head):
+        length = int.from_bytes(head[i + 4 : i + 6], "little")
+        nxt = i + 8 + length
+        if nxt + 2 <= len(head) and head[nxt : nxt + 2] == b"\xb5\x62":
+            hits += 1
+            if hits >= 2 or i == 0:
+                return True
+        i = head.find(b"\xb5\x62", i + 2)
+    return hits > 0
+
+
+def _readers() -> dict[str, Callable[..., tuple[pl.DataFrame, ReadReport]]]:
+    # Imported lazily: a reader's optional heavy dependency loads only when it is used.
+    from overbound.io.glab import read_glab
+    from overbound.io.rtklib import read_rtklib_pos
+    from overbound.io.table import read_csv, read_parquet
+    from overbound.io.ubx import read_ubx
+
+    return {
+        "parquet": read_parquet,
+        "csv": read_csv,
+        "rtklib-pos": read_rtklib_pos,
+        "glab": read_glab,
+        "ubx": read_ubx,
+    }
+
+
+def read(
+    source: Source,
+    *,
+    format: str | None = None,
+    reference: Reference | None = None,
+    station: str | None = None,
+    mapping: Mapping[str, str] | None = None,
+    time_range: tuple[dt.datetime | None, dt.datetime | None] | None = None,
+    strict: bool = False,
+) -> tuple[pl.DataFrame, ReadReport]:
+    """Read any supported input into the epoch table.
+
+    Parameters
+    ----------
+    source : path or open stream (text or binary); ``.gz`` is handled by content.
+    format : one of :data:`FORMATS`; sniffed from the content when ``None``.
+    reference : true antenna position, for formats that carry positions rather than errors.
+    station : station name; by default the reader takes it from the content or the file name.
+    mapping : for ``csv``/``parquet``: canonical column name -> column name in the file.
+    time_range : keep epochs with ``start <= time < stop`` (GPS time); either end may be ``None``.
+    strict : raise on the first malformed row instead of counting it.
+
+    Returns
+    -------
+    (table, report) : the epoch table (see :mod:`overbound.io.schema`) and a
+        :class:`~overbound.io.schema.ReadReport` of rows read, kept and rejected.
+    """
+    fmt = format or sniff(source)
+    readers = _readers()
+    if fmt not in readers:
+        raise InputError(source_name(source), f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}")
+    kwargs: dict = {"reference": reference, "station": station, "strict": strict}
+    if fmt in ("csv", "parquet"):
+        kwargs["mapping"] = mapping
+    table, report = readers[fmt](source, **kwargs)
+    if time_range is not None:
+        table = _filter_time(table, time_range)
+    return table, report
+
+
+def _filter_time(
+    table: pl.DataFrame, time_range: tuple[dt.datetime | None, dt.datetime | None]
+) -> pl.DataFrame:
+    start, stop = time_range
+    expr = pl.lit(True)
+    if start is not None:
+        expr = expr & (pl.col("time") >= start)
+    if stop is not None:
+        expr = expr & (pl.col("time") < stop)
+    return table.filter(expr)

@@ -1,0 +1,1 @@
+"""The papers' procedures, one module each, and the counting KPIs."""

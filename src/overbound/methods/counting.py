@@ -1,0 +1,525 @@
+"""Counting KPIs: availability, continuity, accuracy, safety index and Stanford regions.
+
+These are the plain counts every SBAS performance report starts from, computed per
+service level and per axis (horizontal, vertical, combined) over the epoch table.
+They make no distributional assumption; the statistical methods (PL confidence
+level, tail extrapolation, parametric fits) build on them.
+
+Columns needed: ``time``, ``station``, ``hpe``, ``vpe``, ``hpl``, ``vpl``.
+"""
+
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+import polars as pl
+
+from overbound.services import ServiceLevel
+
+__all__ = [
+    "AXES",
+    "SAFETY_PERCENTILES",
+    "AxisKPI",
+    "ContinuityResult",
+    "CountingResult",
+    "Region",
+    "SafetyIndex",
+    "ServiceKPI",
+    "StanfordCounts",
+    "StanfordHistogram",
+    "availability",
+    "continuity_risk",
+    "count_kpis",
+    "safety_index",
+    "stanford_counts",
+    "stanford_histogram",
+    "stanford_regions",
+]
+
+AXES = ("horizontal", "vertical")
+#: Percentiles of PE/PL reported by :func:`safety_index`.
+SAFETY_PERCENTILES: tuple[float, ...] = (50.0, 95.0, 99.0, 99.9, 99.99, 99.999)
+
+
+class Region(enum.IntEnum):
+    """Disjoint Stanford-diagram regions of one epoch (per axis and alert limit).
+
+    The boundaries follow the Stanford/ESA convention (Tossaint et al. 2006,
+    "The Stanford-ESA integrity diagram", ION GNSS), with protection level PL,
+    position error PE (absolute for the vertical) and alert limit AL:
+
+    * ``PL >= AL``: ``UNAVAILABLE_MI`` when ``PE > PL``, else ``UNAVAILABLE``;
+    * ``PL < AL``: ``HMI`` when ``PE > AL``, else ``MI`` when ``PE > PL``, else ``NORMAL``;
+    * ``NO_SOLUTION`` when PE or PL is NaN.
+
+    Ties: ``PE == PL`` is bounded (normal), ``PL == AL`` is unavailable,
+    ``PE == AL`` is not hazardous.
+    """
+
+    NORMAL = 0
+    MI = 1
+    HMI = 2
+    UNAVAILABLE = 3
+    UNAVAILABLE_MI = 4
+    NO_SOLUTION = 5
+
+    @property
+    def key(self) -> str:
+        return self.name.lower()
+
+    @classmethod
+    def parse(cls, text: str) -> Region:
+        """``Region.parse("hmi") is Region.HMI``; the inverse of :attr:`key`."""
+        try:
+            return cls[text.upper()]
+        except KeyError:
+            raise ValueError(
+                f"unknown Stanford region {text!r}; known: {', '.join(r.key for r in cls)}"
+            ) from None
+
+
+@dataclass(frozen=True, slots=True)
+class StanfordCounts:
+    """Epoch counts per :class:`Region`."""
+
+    normal: int
+    mi: int
+    hmi: int
+    unavailable: int
+    unavailable_mi: int
+    no_solution: int
+
+    @property
+    def total(self) -> int:
+        return self.normal + self.mi + self.hmi + self.unavailable + self.unavailable_mi + self.no_solution
+
+    def to_dict(self) -> dict[str, int]:
+        return {r.key: getattr(self, r.key) for r in Region}
+
+
+@dataclass(frozen=True, slots=True)
+class StanfordHistogram:
+    """2-D histogram of (PE, PL) for a Stanford diagram.
+
+    Attributes
+    ----------
+    axis : ``horizontal`` or ``vertical``.
+    edges : common bin edges of PE and PL (m), from 0 to the plotted maximum.
+    counts : ``counts[i, j]`` epochs with PE in bin ``i`` and PL in bin ``j``.
+    clipped : epochs beyond the last edge on either axis; as the field draws it, they
+        are counted in the last bin (on the border of the diagram).
+    """
+
+    axis: str
+    edges: np.ndarray
+    counts: np.ndarray
+    clipped: int
+
+
+@dataclass(frozen=True, slots=True)
+class ContinuityResult:
+    """Loss-of-continuity count over sliding windows (Kannemans 2006, section 2.1.4).
+
+    Attributes
+    ----------
+    risk : ``n_fail / n_windows``, or ``None`` with ``reason`` when it cannot be counted.
+    n_windows : windows that start on an available epoch and end inside the data.
+    n_fail : of those, windows with at least one unavailable or missing epoch after the start.
+    n_gap_windows : windows touched by at least one missing epoch (a gap) after the start.
+    n_truncated : available start epochs whose window runs past the end of the data (not counted).
+    window_s : exposure time (s).
+    interval_s : nominal sampling interval found (median epoch spacing, s).
+    n_off_grid : epochs more than a quarter interval off the regular time grid (rounded onto it).
+    reason : why ``risk`` is ``None`` (empty otherwise).
+    """
+
+    risk: float | None
+    n_windows: int
+    n_fail: int
+    n_gap_windows: int
+    n_truncated: int
+    window_s: float
+    interval_s: float | None
+    n_off_grid: int = 0
+    reason: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class SafetyIndex:
+    """Safety index PE/PL over epochs with a solution and PL > 0."""
+
+    n: int
+    max: float | None
+    time_of_max: str | None
+    percentiles: dict[str, float | None]
+
+
+@dataclass(frozen=True, slots=True)
+class AxisKPI:
+    """KPIs of one service on one axis (``horizontal``, ``vertical`` or ``combined``)."""
+
+    axis: str
+    alert_limit: float | None
+    availability: float | None
+    n_available: int
+    continuity: ContinuityResult | None
+    stanford: StanfordCounts | None
+
+
+@dataclass(frozen=True, slots=True)
+class ServiceKPI:
+    """Counting KPIs of one service level."""
+
+    service: ServiceLevel
+    horizontal: AxisKPI
+    vertical: AxisKPI
+    combined: AxisKPI
+
+    def axis(self, name: str) -> AxisKPI:
+        return getattr(self, name)
+
+
+@dataclass(frozen=True, slots=True)
+class CountingResult:
+    """Everything :func:`count_kpis` counted.
+
+    Attributes
+    ----------
+    n_total : epochs in the table (with or without a solution).
+    n_with_solution : epochs with finite HPE, VPE, HPL and VPL.
+    stations : station names, in table order of first appearance.
+    start, end : first and last epoch (ISO 8601, GPS time).
+    hpe95, vpe95 : 95th percentiles of HPE and |VPE| over epochs with a solution (m).
+    safety : :class:`SafetyIndex` per axis.
+    services : :class:`ServiceKPI` per service name.
+    histograms : :class:`StanfordHistogram` per ``(axis, plot maximum)``.
+    """
+
+    n_total: int
+    n_with_solution: int
+    stations: tuple[str, ...]
+    start: str | None
+    end: str | None
+    hpe95: float | None
+    vpe95: float | None
+    safety: dict[str, SafetyIndex]
+    services: dict[str, ServiceKPI]
+    histograms: dict[tuple[str, float], StanfordHistogram]
+
+    def histogram(self, axis: str, alert_limit: float) -> StanfordHistogram:
+        """The histogram drawn for ``axis`` and a service with ``alert_limit``."""
+        return self.histograms[(axis, plot_max(alert_limit))]
+
+
+# ---------------------------------------------------------------------------
+# pure array functions
+
+
+def stanford_regions(pe: np.ndarray, pl_: np.ndarray, alert_limit: float) -> np.ndarray:
+    """Region code (:class:`Region`) of each epoch; ``pe`` is the absolute error.
+
+    >>> stanford_regions(np.array([1.0, 5.0, 45.0, 5.0, 60.0, np.nan]),
+    ...                  np.array([5.0, 4.0, 30.0, 40.0, 50.0, 10.0]), 40.0).tolist()
+    [0, 1, 2, 3, 4, 5]
+    """
+    pe = np.asarray(pe, dtype=float)
+    pl_ = np.asarray(pl_, dtype=float)
+    out = np.full(pe.shape, Region.NORMAL, dtype=np.int8)
+    above_pl = pe > pl_
+    avail = pl_ < alert_limit
+    out[avail & above_pl] = Region.MI
+    out[avail & (pe > alert_limit)] = Region.HMI
+    out[~avail] = Region.UNAVAILABLE
+    out[~avail & above_pl] = Region.UNAVAILABLE_MI
+    out[np.isnan(pe) | np.isnan(pl_)] = Region.NO_SOLUTION
+    return out
+
+
+def stanford_counts(pe: np.ndarray, pl_: np.ndarray, alert_limit: float) -> StanfordCounts:
+    """Epoch counts per Stanford region (see :class:`Region` for the boundaries)."""
+    counts = np.bincount(stanford_regions(pe, pl_, alert_limit), minlength=len(Region))
+    return StanfordCounts(**{r.key: int(counts[r]) for r in Region})
+
+
+def availability(pl_: np.ndarray, alert_limit: float) -> tuple[float | None, int]:
+    """Share of all epochs with ``PL < AL`` and the count; NaN PL (no solution) is unavailable."""
+    n = len(pl_)
+    k = int(np.count_nonzero(np.asarray(pl_) < alert_limit))
+    return (k / n if n else None), k
+
+
+def plot_max(alert_limit: float) -> float:
+    """Upper edge of the Stanford diagram's axes for an alert limit: 1.5 AL, rounded up to 10 m."""
+    return float(np.ceil(1.5 * alert_limit / 10.0) * 10.0)
+
+
+def stanford_histogram(
+    pe: np.ndarray, pl_: np.ndarray, *, axis: str, max_value: float, bins: int = 200
+) -> StanfordHistogram:
+    """2-D (PE, PL) histogram on ``[0, max_value]`` with ``bins`` square bins.
+
+    Epochs beyond ``max_value`` go to the last bin and are counted in ``clipped``;
+    no-solution epochs are left out. One pass of ``np.bincount``, no ``histogram2d``.
+    """
+    ok = ~(np.isnan(pe) | np.isnan(pl_))
+    pe, pl_ = np.abs(pe[ok]), pl_[ok]
+    width = max_value / bins
+    i = np.minimum((pe / width).astype(np.int64), bins - 1)
+    j = np.minimum((pl_ / width).astype(np.int64), bins - 1)
+    clipped = int(np.count_nonzero((pe >= max_value) | (pl_ >= max_value)))
+    counts = np.bincount(i * bins + j, minlength=bins * bins).reshape(bins, bins)
+    return StanfordHistogram(axis, np.linspace(0.0, max_value, bins + 1), counts, clipped)
+
+
+def safety_index(pe: np.ndarray, pl_: np.ndarray, time_us: np.ndarray | None = None) -> SafetyIndex:
+    """Maximum and percentiles of PE/PL over epochs with a solution and PL > 0.
+
+    Percentiles use linear interpolation between order statistics (Hyndman & Fan
+    type 7, numpy's default).
+    """
+    ok = np.isfinite(pe) & np.isfinite(pl_) & (pl_ > 0)
+    si = np.abs(pe[ok]) / pl_[ok]
+    keys = [f"p{p:g}" for p in SAFETY_PERCENTILES]
+    if si.size == 0:
+        return SafetyIndex(0, None, None, dict.fromkeys(keys))
+    q = np.percentile(si, SAFETY_PERCENTILES)
+    imax = int(np.argmax(si))
+    when = None
+    if time_us is not None:
+        when = _iso(int(np.asarray(time_us)[ok][imax]))
+    return SafetyIndex(
+        int(si.size), float(si[imax]), when, {k: float(v) for k, v in zip(keys, q, strict=True)}
+    )
+
+
+def _iso(us: int) -> str:
+    return np.datetime64(us, "us").astype("datetime64[ms]").astype(str)
+
+
+# ---------------------------------------------------------------------------
+# continuity
+
+
+@dataclass(frozen=True, slots=True)
+class _Grid:
+    """Epochs of one station placed on a regular time grid."""
+
+    index: np.ndarray  # grid index of each epoch
+    size: int
+    interval_s: float
+    n_off_grid: int
+
+
+def _grid(time_us: np.ndarray) -> _Grid | None:
+    if time_us.size < 2:
+        return None
+    steps = np.diff(time_us)
+    dt = float(np.median(steps[steps > 0])) if np.any(steps > 0) else 0.0
+    if dt <= 0:
+        return None
+    rel = (time_us - time_us[0]) / dt
+    k = np.rint(rel).astype(np.int64)
+    off = int(np.count_nonzero(np.abs(rel - k) > 0.25))
+    return _Grid(k, int(k[-1]) + 1, dt / 1e6, off)
+
+
+def continuity_risk(time_us: np.ndarray, available: np.ndarray, *, window_s: float) -> ContinuityResult:
+    """Loss-of-continuity share of sliding windows, counted in time (Kannemans 2006, 2.1.4).
+
+    One station; ``time_us`` strictly increasing GPS microseconds; ``available`` per epoch.
+
+    Notes
+    -----
+    Kannemans' count, with windows measured in time rather than rows:
+
+    .. math::
+
+        N_{success} = \\#\\{t : A(t) \\wedge A(s)\\ \\forall s \\in (t, t+T]\\},\\quad
+        N_{fail} = \\#\\{t : A(t) \\wedge \\exists s \\in (t, t+T] : \\neg A(s)\\},\\quad
+        P = N_{fail} / (N_{success} + N_{fail})
+
+    with exposure ``T = window_s``. Steps:
+
+    1. The nominal interval Δ is the median positive epoch spacing; each epoch is put on
+       the grid ``k = round((t - t_0)/Δ)``.
+    2. A window starts at every available epoch and holds the ``round(T/Δ)`` grid slots
+       after it. A slot with no epoch (a gap) counts as loss of service, as does an
+       unavailable epoch.
+    3. Windows that would run past the last epoch are not counted (``n_truncated``).
+    4. When Δ > T no window holds a sample, and ``risk`` is ``None`` with the reason.
+    """
+    grid = _grid(np.asarray(time_us, dtype=np.int64))
+    if grid is None:
+        return ContinuityResult(None, 0, 0, 0, 0, window_s, None, 0, "fewer than two epochs")
+    if grid.interval_s > window_s:
+        return ContinuityResult(
+            None,
+            0,
+            0,
+            0,
+            0,
+            window_s,
+            grid.interval_s,
+            grid.n_off_grid,
+            f"sampling interval {grid.interval_s:g} s exceeds the {window_s:g} s exposure time",
+        )
+    w = max(1, round(window_s / grid.interval_s))
+    present = np.zeros(grid.size, dtype=bool)
+    present[grid.index] = True
+    up = np.zeros(grid.size, dtype=bool)
+    up[grid.index] = available
+    # bad[k]: slot k lost (gap or unavailable); prefix sums count them in (k, k+w].
+    lost = np.concatenate(([0], np.cumsum(~up, dtype=np.int64)))
+    gaps = np.concatenate(([0], np.cumsum(~present, dtype=np.int64)))
+    starts = grid.index[np.asarray(available, dtype=bool)]
+    inside = starts + w <= grid.size - 1
+    s = starts[inside]
+    n_fail = int(np.count_nonzero(lost[s + w + 1] - lost[s + 1]))
+    n_gap = int(np.count_nonzero(gaps[s + w + 1] - gaps[s + 1]))
+    n = int(s.size)
+    return ContinuityResult(
+        n_fail / n if n else None,
+        n,
+        n_fail,
+        n_gap,
+        int(np.count_nonzero(~inside)),
+        window_s,
+        grid.interval_s,
+        grid.n_off_grid,
+        "" if n else "no window starts on an available epoch",
+    )
+
+
+def _sum_continuity(parts: list[ContinuityResult], window_s: float) -> ContinuityResult:
+    """Pool per-station counts: windows never span two stations."""
+    if len(parts) == 1:
+        return parts[0]
+    counted = [p for p in parts if p.reason == "" or p.n_windows]
+    n = sum(p.n_windows for p in counted)
+    n_fail = sum(p.n_fail for p in counted)
+    intervals = sorted({p.interval_s for p in parts if p.interval_s is not None})
+    reason = "" if n else "; ".join(sorted({p.reason for p in parts if p.reason}))
+    return ContinuityResult(
+        n_fail / n if n else None,
+        n,
+        n_fail,
+        sum(p.n_gap_windows for p in counted),
+        sum(p.n_truncated for p in counted),
+        window_s,
+        intervals[0] if len(intervals) == 1 else None,
+        sum(p.n_off_grid for p in parts),
+        reason,
+    )
+
+
+# ---------------------------------------------------------------------------
+# the whole table
+
+
+def count_kpis(
+    table: pl.DataFrame,
+    services: tuple[ServiceLevel, ...] | list[ServiceLevel],
+    *,
+    histogram_bins: int = 200,
+) -> CountingResult:
+    """All counting KPIs of ``table`` for each service.
+
+    Columns needed: ``time``, ``station``, ``hpe``, ``vpe``, ``hpl``, ``vpl``.
+
+    Returns
+    -------
+    CountingResult
+        Availability per service and axis (share of *all* epochs with PL < AL;
+        combined = both axes), continuity risk per service window (per station,
+        pooled), Stanford counts and histograms, accuracy (HPE95, |VPE|95 over
+        epochs with a solution) and the safety index PE/PL.
+
+    Notes
+    -----
+    A service without a vertical alert limit (NPA) has null vertical KPIs and its
+    combined KPIs equal the horizontal ones.
+    """
+    hpe = table["hpe"].to_numpy()
+    vpe = np.abs(table["vpe"].to_numpy())
+    hpl = table["hpl"].to_numpy()
+    vpl = table["vpl"].to_numpy()
+    time_us = table["time"].dt.epoch("us").to_numpy()
+    stations = _station_slices(table)
+    ok = np.isfinite(hpe) & np.isfinite(vpe) & np.isfinite(hpl) & np.isfinite(vpl)
+    hpe_ok, vpe_ok = hpe[ok], vpe[ok]
+    pe = {"horizontal": hpe, "vertical": vpe}
+    pls = {"horizontal": hpl, "vertical": vpl}
+    out_services = {s.name: _service_kpi(s, pe, pls, time_us, stations) for s in services}
+    hist = {}
+    for s in services:
+        for axis in AXES:
+            al = s.alert_limit(axis)
+            if al is not None and (axis, plot_max(al)) not in hist:
+                hist[(axis, plot_max(al))] = stanford_histogram(
+                    pe[axis], pls[axis], axis=axis, max_value=plot_max(al), bins=histogram_bins
+                )
+    return CountingResult(
+        n_total=table.height,
+        n_with_solution=int(np.count_nonzero(ok)),
+        stations=tuple(stations),
+        start=_iso(int(time_us.min())) if time_us.size else None,
+        end=_iso(int(time_us.max())) if time_us.size else None,
+        hpe95=float(np.percentile(hpe_ok, 95)) if hpe_ok.size else None,
+        vpe95=float(np.percentile(vpe_ok, 95)) if vpe_ok.size else None,
+        safety={axis: safety_index(pe[axis], pls[axis], time_us) for axis in AXES},
+        services=out_services,
+        histograms=hist,
+    )
+
+
+def _station_slices(table: pl.DataFrame) -> dict[str, np.ndarray]:
+    """Row indices of each station (a slice when the table holds one station)."""
+    st = table["station"]
+    names = st.cast(pl.String).unique(maintain_order=True).to_list()
+    if len(names) <= 1:
+        return {name: slice(None) for name in names}  # type: ignore[misc]
+    codes = st.cast(pl.String).to_numpy()
+    return {name: np.flatnonzero(codes == name) for name in names}
+
+
+def _service_kpi(
+    s: ServiceLevel,
+    pe: dict[str, np.ndarray],
+    pls: dict[str, np.ndarray],
+    time_us: np.ndarray,
+    stations: dict[str, np.ndarray],
+) -> ServiceKPI:
+    axes: dict[str, AxisKPI] = {}
+    masks: dict[str, np.ndarray] = {}
+    for axis in AXES:
+        al = s.alert_limit(axis)
+        if al is None:
+            axes[axis] = AxisKPI(axis, None, None, 0, None, None)
+            continue
+        masks[axis] = pls[axis] < al
+        frac, k = availability(pls[axis], al)
+        cont = _continuity(time_us, masks[axis], stations, s.continuity_window_s)
+        axes[axis] = AxisKPI(axis, al, frac, k, cont, stanford_counts(pe[axis], pls[axis], al))
+    both = masks["horizontal"] & masks["vertical"] if "vertical" in masks else masks["horizontal"]
+    n = len(both)
+    k = int(np.count_nonzero(both))
+    combined = AxisKPI(
+        "combined",
+        None,
+        k / n if n else None,
+        k,
+        _continuity(time_us, both, stations, s.continuity_window_s),
+        None,
+    )
+    return ServiceKPI(s, axes["horizontal"], axes["vertical"], combined)
+
+
+def _continuity(
+    time_us: np.ndarray, avail: np.ndarray, stations: dict[str, np.ndarray], window_s: float
+) -> ContinuityResult:
+    parts = [continuity_risk(time_us[idx], avail[idx], window_s=window_s) for idx in stations.values()]
+    if not parts:
+        return ContinuityResult(None, 0, 0, 0, 0, window_s, None, 0, "no epochs")
+    return _sum_continuity(parts, window_s)

@@ -1,0 +1,1 @@
+"""DO-229 SBAS user engine (issue 6)."""

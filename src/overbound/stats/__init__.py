@@ -1,0 +1,1 @@
+"""Distribution fits, dependence, extreme values, overbounding."""
