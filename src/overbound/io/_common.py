@@ -102,7 +102,7 @@ def _drop_duplicates_or_raise(df: pl.DataFrame, log: RowLog) -> pl.DataFrame:
     # A duplicate is a row whose time equals the last *kept* row's time; with no
     # backward steps that is simply dt == 0 against the previous row.
     dup = np.flatnonzero(same & (dt == 0))
-    for i in dup[:1]:
+    for i in dup[:1].tolist():
         log.reject(
             int(df["_line"][i]), f"duplicate time: {df['time'][i]} repeats line {int(df['_line'][i - 1])}"
         )
