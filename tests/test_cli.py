@@ -1,0 +1,145 @@
+"""The command line end to end on the embedded real WAAS day, and its bad-input behaviour."""
+
+from __future__ import annotations
+
+import gzip
+import json
+import math
+from importlib.resources import files
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from overbound.cli import DEMO_POS, USLO_REFERENCE, main
+from overbound.io.geodesy import Reference, enu_errors_geodetic
+
+POS = Path(str(files("overbound.data") / DEMO_POS))
+
+
+def _hand_parse():
+    """The USLO file read with plain Python: hpl, vpl and positions of every data line."""
+    rows = []
+    for line in gzip.open(POS, "rt"):
+        if line.startswith("%") or not line.strip():
+            continue
+        f = line.split()
+        rows.append(tuple(float(x) for x in (f[2], f[3], f[4], f[-2], f[-1])))
+    return rows
+
+
+@pytest.fixture(scope="module")
+def uslo_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("uslo")
+    res = CliRunner().invoke(main, ["analyze", str(POS), "--reference", USLO_REFERENCE, "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    return out, json.loads((out / "summary.json").read_text()), res
+
+
+def test_analyze_uslo_counts_by_hand(uslo_run):
+    out, doc, _ = uslo_run
+    rows = _hand_parse()
+    assert doc["schema"] == "overbound.summary/1"
+    assert doc["epochs"] == {
+        "total": len(rows),
+        "with_solution": len(rows),
+        "no_solution": 0,
+        "rejected": 0,
+        "invalidated": 0,
+    }
+    assert len(rows) == 2865
+    for name, hal, val in (("APV-I", 40, 50), ("LPV-200", 40, 35), ("CAT-I", 40, 15)):
+        s = doc["services"][name]
+        h = sum(r[3] < hal for r in rows)
+        v = sum(r[4] < val for r in rows)
+        hv = sum(r[3] < hal and r[4] < val for r in rows)
+        assert s["availability"] == pytest.approx(
+            {"horizontal": h / 2865, "vertical": v / 2865, "combined": hv / 2865}, rel=0, abs=1e-12
+        )
+    # the provenance's quick statistic: HPL<40 and VPL<50 at 86.7 % of epochs
+    assert doc["services"]["APV-I"]["availability"]["combined"] == pytest.approx(0.867, abs=5e-4)
+
+
+def test_analyze_uslo_stanford_counts_by_hand(uslo_run):
+    _, doc, _ = uslo_run
+    rows = _hand_parse()
+    ref = Reference.parse(USLO_REFERENCE)
+    import numpy as np
+
+    lat, lon, h = (np.array([r[i] for r in rows]) for i in range(3))
+    e, n, u = enu_errors_geodetic(lat, lon, h, ref)
+    hpe, vpe = np.hypot(e, n), np.abs(u)
+    hpl, vpl = np.array([r[3] for r in rows]), np.array([r[4] for r in rows])
+    st = doc["services"]["LPV-200"]["stanford"]["vertical"]
+    assert st["normal"] == int(np.sum((vpl < 35) & (vpe <= vpl)))
+    assert st["unavailable"] == int(np.sum((vpl >= 35) & (vpe <= vpl)))
+    assert st["mi"] + st["hmi"] + st["unavailable_mi"] == int(np.sum(vpe > vpl))
+    assert doc["accuracy"]["hpe95"] == pytest.approx(float(np.percentile(hpe, 95)), rel=1e-9)
+    assert doc["accuracy"]["vpe95"] == pytest.approx(float(np.percentile(vpe, 95)), rel=1e-9)
+
+
+def test_analyze_uslo_continuity_at_30_s(uslo_run):
+    _, doc, _ = uslo_run
+    lpv = doc["services"]["LPV"]
+    assert lpv["continuity_risk"]["combined"] is None
+    assert "30 s exceeds the 15 s exposure" in lpv["continuity"]["combined"]["reason"]
+    npa = doc["services"]["NPA"]["continuity"]["horizontal"]
+    assert npa["risk"] is not None and npa["window_s"] == 3600 and npa["interval_s"] == 30
+    assert npa["n_gap_windows"] > 0  # the file has gaps (2865 of 2880 epochs)
+    assert doc["services"]["NPA"]["availability"]["vertical"] is None
+
+
+def test_analyze_writes_report_and_is_reproducible(uslo_run, tmp_path):
+    out, _, res = uslo_run
+    assert (out / "report.html").stat().st_size > 10_000
+    assert "report:" in res.output
+    again = CliRunner().invoke(
+        main, ["analyze", str(POS), "--reference", USLO_REFERENCE, "-o", str(tmp_path)]
+    )
+    assert again.exit_code == 0
+    assert (tmp_path / "summary.json").read_bytes() == (out / "summary.json").read_bytes()
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["analyze", "nope.pos", "-o", "x"], "nope.pos: no such file"),
+        (["analyze", str(POS), "-o", "x"], "needs a reference position"),
+        (["analyze", str(POS), "-o", "x", "--reference", "1,2"], "expected lat,lon,h"),
+        (
+            ["analyze", str(POS), "-o", "x", "--reference", USLO_REFERENCE, "--service", "FOO"],
+            "unknown service",
+        ),
+    ],
+)
+def test_bad_input_one_line_error(args, message, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 2
+    assert message in res.output
+
+
+def test_unknown_format_names_file(tmp_path):
+    bad = tmp_path / "random.bin"
+    bad.write_bytes(bytes(range(256)) * 4)
+    res = CliRunner().invoke(main, ["analyze", str(bad), "-o", str(tmp_path / "o")])
+    assert res.exit_code == 2
+    assert f"{bad}: unknown format" in res.output
+
+
+def test_simulate_and_demo(tmp_path):
+    sim = tmp_path / "s.parquet"
+    res = CliRunner().invoke(main, ["simulate", "-o", str(sim), "--days", "0.1", "--seed", "3"])
+    assert res.exit_code == 0, res.output
+    assert sim.exists() and "true P(|VPE|>VPL)" in res.output
+    res = CliRunner().invoke(main, ["demo", "-o", str(tmp_path / "demo"), "--days", "0.2"])
+    assert res.exit_code == 0, res.output
+    for sub in ("uslo", "simulated"):
+        doc = json.loads((tmp_path / "demo" / sub / "summary.json").read_text())
+        assert doc["epochs"]["total"] > 0
+        assert (tmp_path / "demo" / sub / "report.html").exists()
+    sim_doc = json.loads((tmp_path / "demo" / "simulated" / "summary.json").read_text())
+    # 1 Hz: continuity is countable for the approach services
+    assert not math.isnan(sim_doc["services"]["LPV"]["continuity"]["combined"]["n_windows"])
+    assert sim_doc["services"]["LPV"]["continuity"]["combined"]["n_windows"] > 10_000
+    assert "index:" in res.output
