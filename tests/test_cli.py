@@ -8,6 +8,7 @@ import math
 from importlib.resources import files
 from pathlib import Path
 
+import numpy as np
 import pytest
 from click.testing import CliRunner
 
@@ -37,7 +38,7 @@ def uslo_run(tmp_path_factory):
 
 
 def test_analyze_uslo_counts_by_hand(uslo_run):
-    out, doc, _ = uslo_run
+    _, doc, _ = uslo_run
     rows = _hand_parse()
     assert doc["schema"] == "overbound.summary/1"
     assert doc["epochs"] == {
@@ -64,8 +65,6 @@ def test_analyze_uslo_stanford_counts_by_hand(uslo_run):
     _, doc, _ = uslo_run
     rows = _hand_parse()
     ref = Reference.parse(USLO_REFERENCE)
-    import numpy as np
-
     lat, lon, h = (np.array([r[i] for r in rows]) for i in range(3))
     e, n, u = enu_errors_geodetic(lat, lon, h, ref)
     hpe, vpe = np.hypot(e, n), np.abs(u)
@@ -74,6 +73,9 @@ def test_analyze_uslo_stanford_counts_by_hand(uslo_run):
     assert st["normal"] == int(np.sum((vpl < 35) & (vpe <= vpl)))
     assert st["unavailable"] == int(np.sum((vpl >= 35) & (vpe <= vpl)))
     assert st["mi"] + st["hmi"] + st["unavailable_mi"] == int(np.sum(vpe > vpl))
+    sh = doc["services"]["APV-I"]["stanford"]["horizontal"]
+    assert sh["normal"] == int(np.sum((hpl < 40) & (hpe <= hpl)))
+    assert sh["unavailable"] == int(np.sum((hpl >= 40) & (hpe <= hpl)))
     assert doc["accuracy"]["hpe95"] == pytest.approx(float(np.percentile(hpe, 95)), rel=1e-9)
     assert doc["accuracy"]["vpe95"] == pytest.approx(float(np.percentile(vpe, 95)), rel=1e-9)
 

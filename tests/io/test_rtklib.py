@@ -16,14 +16,8 @@ import pytest
 from polars.testing import assert_frame_equal
 
 from overbound.io.geodesy import Reference
-from overbound.io.rtklib import (
-    GPS_UTC_LEAP_SECONDS,
-    SOLUTION_QUALITY,
-    gps_utc_offset,
-    parse_pos_header,
-    read_rtklib_pos,
-    utc_to_gpst,
-)
+from overbound.io.gpstime import GPS_UTC_LEAP_SECONDS, gps_utc_offset, utc_to_gpst
+from overbound.io.rtklib import SOLUTION_QUALITY, parse_pos_header, read_rtklib_pos
 from overbound.io.schema import InputError
 
 CORPUS = Path(__file__).parents[1] / "data" / "rtklib-pos"

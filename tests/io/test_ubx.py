@@ -13,8 +13,9 @@ import pytest
 from polars.testing import assert_frame_equal
 
 from overbound.io.geodesy import Reference
+from overbound.io.gpstime import GPS_UTC_LEAP_SECONDS
 from overbound.io.schema import InputError, validate_epochs
-from overbound.io.ubx import GPS_UTC_LEAP_SECONDS, read_ubx
+from overbound.io.ubx import read_ubx
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "ubx"
 #: The generator's reference position (make_ubx_fixtures.REF_*).

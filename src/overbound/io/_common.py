@@ -88,7 +88,8 @@ def _drop_duplicates_or_raise(df: pl.DataFrame, log: RowLog) -> pl.DataFrame:
     if df.height < 2:
         return df
     t = df["time"].dt.epoch("us").to_numpy()
-    st = df["station"].cast(pl.String).to_numpy()
+    # Categorical codes compare like the names, without materialising millions of strings.
+    st = df["station"].cast(pl.Categorical()).to_physical().to_numpy()
     same = np.concatenate([[False], st[1:] == st[:-1]])
     dt = np.concatenate([[1], np.diff(t)])
     back = np.flatnonzero(same & (dt < 0))
@@ -96,7 +97,7 @@ def _drop_duplicates_or_raise(df: pl.DataFrame, log: RowLog) -> pl.DataFrame:
         i = int(back[0])
         raise InputError(
             log.source,
-            f"backward time {df['time'][i]} after {df['time'][i - 1]} (station {st[i]})",
+            f"backward time {df['time'][i]} after {df['time'][i - 1]} (station {df['station'][i]})",
             line=int(df["_line"][i]),
         )
     # A duplicate is a row whose time equals the last *kept* row's time; with no

@@ -32,42 +32,16 @@ import polars as pl
 
 from overbound.io._common import RowLog, finalize_epochs
 from overbound.io.geodesy import Reference, enu_errors_ecef, enu_errors_geodetic
+from overbound.io.gpstime import leap_seconds, utc_to_gpst
 from overbound.io.open import Source, open_text, source_name
 from overbound.io.schema import InputError, ReadReport
 
 __all__ = [
-    "GPS_UTC_LEAP_SECONDS",
     "SOLUTION_QUALITY",
     "PosHeader",
-    "gps_utc_offset",
     "parse_pos_header",
     "read_rtklib_pos",
-    "utc_to_gpst",
 ]
-
-#: GPS-UTC in seconds, in force from 00:00 UTC of each date on. Source: IERS Bulletin C
-#: (TAI-UTC, https://hpiers.obspm.fr/eoppc/bul/bulc/) minus TAI-GPS = 19 s. Bulletin C 69
-#: (January 2025) announces no leap second at the end of June 2025, so 18 s still holds.
-GPS_UTC_LEAP_SECONDS: tuple[tuple[dt.date, int], ...] = (
-    (dt.date(1981, 7, 1), 1),
-    (dt.date(1982, 7, 1), 2),
-    (dt.date(1983, 7, 1), 3),
-    (dt.date(1985, 7, 1), 4),
-    (dt.date(1988, 1, 1), 5),
-    (dt.date(1990, 1, 1), 6),
-    (dt.date(1991, 1, 1), 7),
-    (dt.date(1992, 7, 1), 8),
-    (dt.date(1993, 7, 1), 9),
-    (dt.date(1994, 7, 1), 10),
-    (dt.date(1996, 1, 1), 11),
-    (dt.date(1997, 7, 1), 12),
-    (dt.date(1999, 1, 1), 13),
-    (dt.date(2006, 1, 1), 14),
-    (dt.date(2009, 1, 1), 15),
-    (dt.date(2012, 7, 1), 16),
-    (dt.date(2015, 7, 1), 17),
-    (dt.date(2017, 1, 1), 18),
-)
 
 #: RTKLIB solution quality flag ``Q`` -> ``mode`` name. RTKLIB ``rtklib.h`` ``SOLQ_*``
 #: (the ``.pos`` header comment lists 1-6; 7 = dead reckoning in 2.4.3; 0 = no solution).
@@ -230,7 +204,8 @@ def read_rtklib_pos(
 
     time = _to_gpst(good["_time"], header.time_system)
     if header.time_system != "GPST" and good.height:
-        offsets = sorted({int(v) for v in _leap_us(_utc_series(good["_time"], header.time_system)) // _US})
+        utc_us = _utc_series(good["_time"], header.time_system).dt.epoch("us").to_numpy()
+        offsets = sorted({int(v) for v in leap_seconds(utc_us)})
         notes.append(
             f"{header.time_system} times converted to GPST (GPS-UTC = {', '.join(map(str, offsets))} s)"
         )
@@ -483,38 +458,7 @@ def _utc_series(naive: pl.Series, system: str) -> pl.Series:
     return naive - dt.timedelta(seconds=_JST_UTC_S) if system == "JST" else naive
 
 
-def _leap_us(utc: pl.Series) -> np.ndarray:
-    """GPS-UTC in microseconds for each UTC time (:data:`GPS_UTC_LEAP_SECONDS`)."""
-    starts = np.array([(d - dt.date(1970, 1, 1)).days * 86_400 * _US for d, _ in GPS_UTC_LEAP_SECONDS])
-    leaps = np.array([0] + [s for _, s in GPS_UTC_LEAP_SECONDS], dtype=np.int64) * _US
-    t = utc.dt.epoch("us").to_numpy()
-    return leaps[np.searchsorted(starts, t, side="right")]
-
-
 def _to_gpst(naive: pl.Series, system: str) -> pl.Series:
     if system == "GPST":
         return naive.alias("time")
     return utc_to_gpst(_utc_series(naive, system)).alias("time")
-
-
-def gps_utc_offset(utc: dt.datetime) -> int:
-    """GPS-UTC (s) in force at UTC time ``utc``, from :data:`GPS_UTC_LEAP_SECONDS`.
-
-    >>> gps_utc_offset(dt.datetime(2006, 12, 27)), gps_utc_offset(dt.datetime(2016, 12, 31, 23, 59, 59))
-    (14, 17)
-    """
-    return int(_leap_us(pl.Series([utc], dtype=pl.Datetime("us")))[0] // _US)
-
-
-def utc_to_gpst(utc: pl.Series) -> pl.Series:
-    """Naive UTC datetimes -> naive GPS-time datetimes (``Datetime("us")``), vectorised.
-
-    GPST = UTC + (GPS-UTC), with GPS-UTC from :data:`GPS_UTC_LEAP_SECONDS` (0 before
-    1981-07-01). A leap second itself (``23:59:60``) cannot be represented.
-
-    >>> utc_to_gpst(pl.Series([dt.datetime(2017, 1, 1)])).to_list()
-    [datetime.datetime(2017, 1, 1, 0, 0, 18)]
-    """
-    utc = utc.cast(pl.Datetime("us"))
-    us = utc.dt.epoch("us").to_numpy() + _leap_us(utc)
-    return pl.from_epoch(pl.Series(utc.name, us), time_unit="us").cast(pl.Datetime("us"))

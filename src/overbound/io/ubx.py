@@ -22,10 +22,11 @@ from pyubx2.exceptions import UBXMessageError, UBXParseError, UBXTypeError
 
 from overbound.io._common import RowLog, finalize_epochs
 from overbound.io.geodesy import Reference, enu_errors_geodetic
+from overbound.io.gpstime import leap_seconds
 from overbound.io.open import open_binary, source_name
 from overbound.io.schema import InputError, ReadReport
 
-__all__ = ["GPS_UTC_LEAP_SECONDS", "PL_FRAMES", "read_ubx"]
+__all__ = ["PL_FRAMES", "read_ubx"]
 
 _SYNC = b"\xb5\x62"
 _HEADER = 6  # sync (2), class, id, length (2)
@@ -48,28 +49,6 @@ PL_FRAMES = {
 _FIX_NAMES = {0: "no fix", 1: "DR", 2: "2D", 3: "3D", 4: "GNSS+DR", 5: "time only"}
 _CARR = {1: "/RTK-float", 2: "/RTK-fixed"}
 _FIX_3D = (3, 4)
-#: GPS-UTC in seconds from each UTC date on, from the leap seconds announced in IERS
-#: Bulletin C (Bulletin C 70, July 2025: no leap second at the end of December 2025).
-GPS_UTC_LEAP_SECONDS: tuple[tuple[dt.date, int], ...] = (
-    (dt.date(1981, 7, 1), 1),
-    (dt.date(1982, 7, 1), 2),
-    (dt.date(1983, 7, 1), 3),
-    (dt.date(1985, 7, 1), 4),
-    (dt.date(1988, 1, 1), 5),
-    (dt.date(1990, 1, 1), 6),
-    (dt.date(1991, 1, 1), 7),
-    (dt.date(1992, 7, 1), 8),
-    (dt.date(1993, 7, 1), 9),
-    (dt.date(1994, 7, 1), 10),
-    (dt.date(1996, 1, 1), 11),
-    (dt.date(1997, 7, 1), 12),
-    (dt.date(1999, 1, 1), 13),
-    (dt.date(2006, 1, 1), 14),
-    (dt.date(2009, 1, 1), 15),
-    (dt.date(2012, 7, 1), 16),
-    (dt.date(2015, 7, 1), 17),
-    (dt.date(2017, 1, 1), 18),
-)
 _GPS_EPOCH = dt.datetime(1980, 1, 6)
 _WEEK_MS = 604_800_000
 _KEY = ["seg", "iTOW"]
@@ -453,9 +432,7 @@ def _mode() -> pl.Expr:
 
 def _leap_from_table(days: np.ndarray) -> np.ndarray:
     """GPS-UTC (s) on each UTC day (``datetime64[D]``) from :data:`GPS_UTC_LEAP_SECONDS`."""
-    since = np.array([d for d, _ in GPS_UTC_LEAP_SECONDS], dtype="datetime64[D]")
-    values = np.array([0] + [v for _, v in GPS_UTC_LEAP_SECONDS], dtype=np.int64)
-    return values[np.searchsorted(since, days, side="right")]
+    return leap_seconds(days.astype("datetime64[us]").astype(np.int64))
 
 
 def _time(epochs: pl.DataFrame, tg: pl.DataFrame, name: str) -> tuple[pl.Series, str]:

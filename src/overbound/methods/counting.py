@@ -310,19 +310,34 @@ class _Grid:
     size: int
     interval_s: float
     n_off_grid: int
+    gap_prefix: np.ndarray  # gap_prefix[k] = empty grid slots before slot k
 
 
 def _grid(time_us: np.ndarray) -> _Grid | None:
     if time_us.size < 2:
         return None
     steps = np.diff(time_us)
-    dt = float(np.median(steps[steps > 0])) if np.any(steps > 0) else 0.0
-    if dt <= 0:
+    steps = steps[steps > 0]
+    if steps.size == 0:
         return None
+    # polars' median: numpy's introselect degrades on millions of equal steps with a few large ones
+    dt = float(pl.Series(steps).median())
     rel = (time_us - time_us[0]) / dt
     k = np.rint(rel).astype(np.int64)
     off = int(np.count_nonzero(np.abs(rel - k) > 0.25))
-    return _Grid(k, int(k[-1]) + 1, dt / 1e6, off)
+    size = int(k[-1]) + 1
+    empty = np.ones(size, dtype=bool)
+    empty[k] = False
+    return _Grid(k, size, dt / 1e6, off, _prefix(empty))
+
+
+def _prefix(flags: np.ndarray) -> np.ndarray:
+    """``out[k]`` = number of set flags before ``k``; int32 while it fits (halves memory)."""
+    dtype = np.int32 if flags.size < 2**31 - 1 else np.int64
+    out = np.empty(flags.size + 1, dtype=dtype)
+    out[0] = 0
+    np.cumsum(flags, dtype=dtype, out=out[1:])
+    return out
 
 
 def continuity_risk(time_us: np.ndarray, available: np.ndarray, *, window_s: float) -> ContinuityResult:
@@ -350,41 +365,36 @@ def continuity_risk(time_us: np.ndarray, available: np.ndarray, *, window_s: flo
     3. Windows that would run past the last epoch are not counted (``n_truncated``).
     4. When Δ > T no window holds a sample, and ``risk`` is ``None`` with the reason.
     """
-    grid = _grid(np.asarray(time_us, dtype=np.int64))
+    return _continuity_on_grid(_grid(np.asarray(time_us, dtype=np.int64)), available, window_s)
+
+
+def _continuity_on_grid(grid: _Grid | None, available: np.ndarray, window_s: float) -> ContinuityResult:
     if grid is None:
         return ContinuityResult(None, 0, 0, 0, 0, window_s, None, 0, "fewer than two epochs")
     if grid.interval_s > window_s:
-        return ContinuityResult(
-            None,
-            0,
-            0,
-            0,
-            0,
-            window_s,
-            grid.interval_s,
-            grid.n_off_grid,
-            f"sampling interval {grid.interval_s:g} s exceeds the {window_s:g} s exposure time",
-        )
+        reason = f"sampling interval {grid.interval_s:g} s exceeds the {window_s:g} s exposure time"
+        return ContinuityResult(None, 0, 0, 0, 0, window_s, grid.interval_s, grid.n_off_grid, reason)
     w = max(1, round(window_s / grid.interval_s))
-    present = np.zeros(grid.size, dtype=bool)
-    present[grid.index] = True
-    up = np.zeros(grid.size, dtype=bool)
+    up = np.zeros(grid.size, dtype=bool)  # slot holds an available epoch
     up[grid.index] = available
-    # bad[k]: slot k lost (gap or unavailable); prefix sums count them in (k, k+w].
-    lost = np.concatenate(([0], np.cumsum(~up, dtype=np.int64)))
-    gaps = np.concatenate(([0], np.cumsum(~present, dtype=np.int64)))
-    starts = grid.index[np.asarray(available, dtype=bool)]
-    inside = starts + w <= grid.size - 1
-    s = starts[inside]
-    n_fail = int(np.count_nonzero(lost[s + w + 1] - lost[s + 1]))
-    n_gap = int(np.count_nonzero(gaps[s + w + 1] - gaps[s + 1]))
-    n = int(s.size)
+    lost_prefix = _prefix(~up)  # a slot is lost when it is a gap or unavailable
+    # Windows start at slots 0..K-1 (their w following slots exist); events in slots
+    # (k, k+w] = prefix[k+w+1] - prefix[k+1], taken as contiguous slices, not gathers.
+    k_max = max(grid.size - w, 0)
+    starts = up[:k_max]
+    n_fail = int(
+        np.count_nonzero(starts & (lost_prefix[w + 1 : w + 1 + k_max] != lost_prefix[1 : 1 + k_max]))
+    )
+    gp = grid.gap_prefix
+    n_gap = int(np.count_nonzero(starts & (gp[w + 1 : w + 1 + k_max] != gp[1 : 1 + k_max])))
+    n = int(np.count_nonzero(starts))
+    n_truncated = int(np.count_nonzero(up[k_max:]))
     return ContinuityResult(
         n_fail / n if n else None,
         n,
         n_fail,
         n_gap,
-        int(np.count_nonzero(~inside)),
+        n_truncated,
         window_s,
         grid.interval_s,
         grid.n_off_grid,
@@ -396,17 +406,16 @@ def _sum_continuity(parts: list[ContinuityResult], window_s: float) -> Continuit
     """Pool per-station counts: windows never span two stations."""
     if len(parts) == 1:
         return parts[0]
-    counted = [p for p in parts if p.reason == "" or p.n_windows]
-    n = sum(p.n_windows for p in counted)
-    n_fail = sum(p.n_fail for p in counted)
+    n = sum(p.n_windows for p in parts)
+    n_fail = sum(p.n_fail for p in parts)
     intervals = sorted({p.interval_s for p in parts if p.interval_s is not None})
     reason = "" if n else "; ".join(sorted({p.reason for p in parts if p.reason}))
     return ContinuityResult(
         n_fail / n if n else None,
         n,
         n_fail,
-        sum(p.n_gap_windows for p in counted),
-        sum(p.n_truncated for p in counted),
+        sum(p.n_gap_windows for p in parts),
+        sum(p.n_truncated for p in parts),
         window_s,
         intervals[0] if len(intervals) == 1 else None,
         sum(p.n_off_grid for p in parts),
@@ -448,10 +457,10 @@ def count_kpis(
     time_us = table["time"].dt.epoch("us").to_numpy()
     stations = _station_slices(table)
     ok = np.isfinite(hpe) & np.isfinite(vpe) & np.isfinite(hpl) & np.isfinite(vpl)
-    hpe_ok, vpe_ok = hpe[ok], vpe[ok]
     pe = {"horizontal": hpe, "vertical": vpe}
     pls = {"horizontal": hpl, "vertical": vpl}
-    out_services = {s.name: _service_kpi(s, pe, pls, time_us, stations) for s in services}
+    counter = _Counter(pe, pls, [(idx, _grid(time_us[idx])) for idx in stations.values()])
+    out_services = {s.name: counter.service(s) for s in services}
     hist = {}
     for s in services:
         for axis in AXES:
@@ -466,60 +475,65 @@ def count_kpis(
         stations=tuple(stations),
         start=_iso(int(time_us.min())) if time_us.size else None,
         end=_iso(int(time_us.max())) if time_us.size else None,
-        hpe95=float(np.percentile(hpe_ok, 95)) if hpe_ok.size else None,
-        vpe95=float(np.percentile(vpe_ok, 95)) if vpe_ok.size else None,
+        hpe95=_percentile95(hpe[ok]),
+        vpe95=_percentile95(vpe[ok]),
         safety={axis: safety_index(pe[axis], pls[axis], time_us) for axis in AXES},
         services=out_services,
         histograms=hist,
     )
 
 
-def _station_slices(table: pl.DataFrame) -> dict[str, np.ndarray]:
+def _percentile95(x: np.ndarray) -> float | None:
+    return float(np.percentile(x, 95)) if x.size else None
+
+
+def _station_slices(table: pl.DataFrame) -> dict[str, np.ndarray | slice]:
     """Row indices of each station (a slice when the table holds one station)."""
-    st = table["station"]
-    names = st.cast(pl.String).unique(maintain_order=True).to_list()
+    st = table["station"].cast(pl.Categorical())
+    uniq = st.unique(maintain_order=True)
+    names = uniq.cast(pl.String).to_list()
     if len(names) <= 1:
-        return {name: slice(None) for name in names}  # type: ignore[misc]
-    codes = st.cast(pl.String).to_numpy()
-    return {name: np.flatnonzero(codes == name) for name in names}
+        return {name: slice(None) for name in names}
+    codes = st.to_physical().to_numpy()  # compare codes, not millions of strings
+    return {name: np.flatnonzero(codes == code) for name, code in zip(names, uniq.to_physical(), strict=True)}
 
 
-def _service_kpi(
-    s: ServiceLevel,
-    pe: dict[str, np.ndarray],
-    pls: dict[str, np.ndarray],
-    time_us: np.ndarray,
-    stations: dict[str, np.ndarray],
-) -> ServiceKPI:
-    axes: dict[str, AxisKPI] = {}
-    masks: dict[str, np.ndarray] = {}
-    for axis in AXES:
-        al = s.alert_limit(axis)
-        if al is None:
-            axes[axis] = AxisKPI(axis, None, None, 0, None, None)
-            continue
-        masks[axis] = pls[axis] < al
-        frac, k = availability(pls[axis], al)
-        cont = _continuity(time_us, masks[axis], stations, s.continuity_window_s)
-        axes[axis] = AxisKPI(axis, al, frac, k, cont, stanford_counts(pe[axis], pls[axis], al))
-    both = masks["horizontal"] & masks["vertical"] if "vertical" in masks else masks["horizontal"]
-    n = len(both)
-    k = int(np.count_nonzero(both))
-    combined = AxisKPI(
-        "combined",
-        None,
-        k / n if n else None,
-        k,
-        _continuity(time_us, both, stations, s.continuity_window_s),
-        None,
-    )
-    return ServiceKPI(s, axes["horizontal"], axes["vertical"], combined)
+@dataclass
+class _Counter:
+    """Per-table state shared by the services: arrays, station grids, and continuity
+    results cached by alert limits and window (APV-I and LPV share theirs)."""
 
+    pe: dict[str, np.ndarray]
+    pls: dict[str, np.ndarray]
+    grids: list[tuple[np.ndarray | slice, _Grid | None]]
 
-def _continuity(
-    time_us: np.ndarray, avail: np.ndarray, stations: dict[str, np.ndarray], window_s: float
-) -> ContinuityResult:
-    parts = [continuity_risk(time_us[idx], avail[idx], window_s=window_s) for idx in stations.values()]
-    if not parts:
-        return ContinuityResult(None, 0, 0, 0, 0, window_s, None, 0, "no epochs")
-    return _sum_continuity(parts, window_s)
+    def __post_init__(self) -> None:
+        self._cache: dict[tuple, ContinuityResult] = {}
+
+    def continuity(self, key: tuple, avail: np.ndarray, window_s: float) -> ContinuityResult:
+        if (key, window_s) not in self._cache:
+            parts = [_continuity_on_grid(g, avail[idx], window_s) for idx, g in self.grids]
+            self._cache[(key, window_s)] = (
+                _sum_continuity(parts, window_s)
+                if parts
+                else ContinuityResult(None, 0, 0, 0, 0, window_s, None, 0, "no epochs")
+            )
+        return self._cache[(key, window_s)]
+
+    def service(self, s: ServiceLevel) -> ServiceKPI:
+        axes: dict[str, AxisKPI] = {}
+        masks: dict[str, np.ndarray] = {}
+        for axis in AXES:
+            al = s.alert_limit(axis)
+            if al is None:
+                axes[axis] = AxisKPI(axis, None, None, 0, None, None)
+                continue
+            masks[axis] = self.pls[axis] < al
+            frac, k = availability(self.pls[axis], al)
+            cont = self.continuity((axis, al), masks[axis], s.continuity_window_s)
+            axes[axis] = AxisKPI(axis, al, frac, k, cont, stanford_counts(self.pe[axis], self.pls[axis], al))
+        both = masks["horizontal"] & masks["vertical"] if "vertical" in masks else masks["horizontal"]
+        n, k = len(both), int(np.count_nonzero(both))
+        cont = self.continuity(("combined", s.hal, s.val), both, s.continuity_window_s)
+        combined = AxisKPI("combined", None, k / n if n else None, k, cont, None)
+        return ServiceKPI(s, axes["horizontal"], axes["vertical"], combined)

@@ -1,0 +1,756 @@
+"""``report.html``: one self-contained, offline, printable page of an analysis.
+
+The page holds its figures as base64 PNG data URIs and its style as inline CSS; it
+loads nothing (no links, scripts or fonts), so it opens offline and can be archived
+or mailed as one file. The same :class:`~overbound.analysis.Analysis` gives the same
+bytes on every run: there is no timestamp, and the PNGs carry no software or date
+metadata.
+
+Sections (each a ``<section id=...>`` with an ``<h2>``): ``overview``, ``accuracy``,
+one ``service-<name>`` per service level, ``time-series``, ``method-notes`` and
+``summary-data`` (the ``summary.json`` document, folded).
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from overbound import __version__
+from overbound.analysis import Analysis, Verdict, verdicts
+from overbound.methods.counting import (
+    AXES,
+    SAFETY_PERCENTILES,
+    AxisKPI,
+    ContinuityResult,
+    CountingResult,
+    Region,
+    ServiceKPI,
+)
+from overbound.report.figures import (
+    REGION_COLOURS,
+    REGION_LABELS,
+    _percent,
+    close_figure,
+    figure_png,
+    plot_safety_index,
+    plot_stanford,
+    plot_timeseries,
+)
+from overbound.report.json import dumps, summary_dict
+from overbound.services import ServiceLevel
+
+__all__ = ["REPORT_NAME", "render_report", "section_ids", "write_report"]
+
+#: File name written by :func:`write_report`.
+REPORT_NAME = "report.html"
+_DPI = 110
+_AXIS_NAMES = {"horizontal": "Horizontal", "vertical": "Vertical", "combined": "Combined"}
+_PE = {"horizontal": "HPE", "vertical": "|VPE|"}
+_PL = {"horizontal": "HPL", "vertical": "VPL"}
+
+
+def write_report(analysis: Analysis, directory: str | Path, *, summary: dict | None = None) -> Path:
+    """Write ``report.html`` into ``directory`` (created if needed); return its path.
+
+    Parameters
+    ----------
+    analysis : the result of :func:`~overbound.analysis.analyze`.
+    directory : output folder.
+    summary : the ``summary.json`` document of the same analysis
+        (:func:`~overbound.report.json.summary_dict`), embedded folded at the end of the
+        page; computed when ``None``. The tables themselves are drawn from ``analysis``.
+
+    Returns
+    -------
+    Path
+        ``directory / "report.html"``.
+    """
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    path = directory / REPORT_NAME
+    path.write_bytes(render_report(analysis, summary=summary).encode("utf-8"))
+    return path
+
+
+def section_ids(analysis: Analysis) -> tuple[str, ...]:
+    """The ``id`` of every ``<section>`` of the report of ``analysis``, in page order."""
+    return (
+        "overview",
+        "accuracy",
+        *(_service_id(s) for s in analysis.services),
+        "time-series",
+        "method-notes",
+        "summary-data",
+    )
+
+
+def render_report(analysis: Analysis, *, summary: dict | None = None) -> str:
+    """The text of ``report.html`` (see :func:`write_report`)."""
+    doc = summary if summary is not None else summary_dict(analysis)
+    c = analysis.counting
+    body = [
+        _header(analysis),
+        _overview(analysis),
+        _accuracy(c),
+        *(_service(analysis, s) for s in analysis.services),
+        _time_series(analysis),
+        _method_notes(c),
+        _section(
+            "summary-data",
+            "Summary data",
+            "<p>The machine-readable summary of this analysis (schema "
+            f"<code>{_e(str(doc.get('schema', '')))}</code>), as written to <code>summary.json</code>.</p>"
+            f"<details><summary>summary.json</summary><pre>{_e(dumps(doc))}</pre></details>",
+        ),
+    ]
+    return (
+        "<!DOCTYPE html>\n"
+        '<html lang="en">\n<head>\n<meta charset="utf-8">\n'
+        '<meta name="viewport" content="width=device-width, initial-scale=1">\n'
+        f'<meta name="generator" content="overbound {_e(__version__)}">\n'
+        f"<title>{_e(analysis.title)} — overbound integrity report</title>\n"
+        f"<style>{_CSS}</style>\n</head>\n<body>\n<main>\n"
+        + "\n".join(body)
+        + "\n</main>\n</body>\n</html>\n"
+    )
+
+
+# ---------------------------------------------------------------------------
+# formatting: every _h_* function returns HTML; everything else is escaped with _e
+
+
+def _e(text: object) -> str:
+    return html.escape(str(text), quote=True)
+
+
+def _h_int(n: int | None) -> str:
+    return "n.a." if n is None else f"{n:,}"
+
+
+def _h_sci(x: float | None) -> str:
+    """A probability: plain down to 0.001, else ``m·10<sup>e</sup>``."""
+    if x is None or not math.isfinite(x):
+        return "n.a."
+    if x == 0:
+        return "0"
+    if 1e-3 <= abs(x) < 1e4:
+        return f"{x:.4g}"
+    exp = math.floor(math.log10(abs(x)))
+    mant = x / 10.0**exp
+    if round(mant, 2) >= 10:
+        mant, exp = mant / 10, exp + 1
+    return f"{mant:.3g}·10<sup>{'−' if exp < 0 else ''}{abs(exp)}</sup>"
+
+
+def _h_m(x: float | None, digits: int = 2) -> str:
+    return "n.a." if x is None or not math.isfinite(x) else f"{x:.{digits}f}&nbsp;m"
+
+
+def _h_ratio(x: float | None) -> str:
+    """A safety index PE/PL to four decimals."""
+    return "n.a." if x is None or not math.isfinite(x) else f"{x:.4f}"
+
+
+def _h_share(x: float) -> str:
+    """A requirement share (0.99) as a percentage without needless digits."""
+    return f"{100 * x:.10g}&nbsp;%"
+
+
+def _h_badge(passed: bool | None, kpi: str, note: str = "") -> str:
+    kind, text = {True: ("pass", "PASS"), False: ("fail", "FAIL"), None: ("na", "n.a.")}[passed]
+    title = f' title="{_e(note)}"' if note else ""
+    return f'<span class="badge {kind}" data-kpi="{_e(kpi)}"{title}>{text}</span>'
+
+
+class _Num(str):
+    """An HTML table cell holding a number (right-aligned)."""
+
+
+def _num(cell: str) -> _Num:
+    return _Num(cell)
+
+
+def _section(sid: str, title: str, content: str) -> str:
+    return f'<section id="{_e(sid)}">\n<h2>{_e(title)}</h2>\n{content}\n</section>'
+
+
+def _table(head: list[str], rows: list[list[str]], *, cls: str = "", caption: str = "") -> str:
+    """A table from HTML cells; :func:`_num` cells are right-aligned (numbers)."""
+
+    def cell(tag: str, c: str) -> str:
+        return f'<{tag} class="num">{c}</{tag}>' if isinstance(c, _Num) else f"<{tag}>{c}</{tag}>"
+
+    cap = f"<caption>{caption}</caption>" if caption else ""
+    thead = "<tr>" + "".join(cell("th", h) for h in head) + "</tr>"
+    tbody = "\n".join("<tr>" + "".join(cell("td", c) for c in r) + "</tr>" for r in rows)
+    cls_attr = f' class="{cls}"' if cls else ""
+    return f"<table{cls_attr}>{cap}<thead>{thead}</thead>\n<tbody>\n{tbody}\n</tbody></table>"
+
+
+def _service_id(s: ServiceLevel) -> str:
+    return "service-" + "-".join(s.name.split())
+
+
+# ---------------------------------------------------------------------------
+# figures
+
+
+@dataclass(frozen=True, slots=True)
+class _Figure:
+    name: str
+    png: bytes
+    alt: str
+    caption: str
+
+    def html(self) -> str:
+        width = int.from_bytes(self.png[16:20], "big")
+        height = int.from_bytes(self.png[20:24], "big")
+        data = base64.b64encode(self.png).decode("ascii")
+        return (
+            f'<figure><img src="data:image/png;base64,{data}" width="{width}" height="{height}" '
+            f'alt="{_e(self.alt)}" data-figure="{_e(self.name)}">'
+            f"<figcaption>{_e(self.caption)}</figcaption></figure>"
+        )
+
+
+def _render(ax, name: str, alt: str, caption: str) -> _Figure:
+    fig = ax.figure
+    try:
+        return _Figure(name, figure_png(fig, dpi=_DPI), alt, caption)
+    finally:
+        close_figure(fig)
+
+
+# ---------------------------------------------------------------------------
+# sections
+
+
+def _header(a: Analysis) -> str:
+    links = "".join(
+        f'<li><a href="#{_e(sid)}">{_e(label)}</a></li>'
+        for sid, label in [
+            ("overview", "Overview"),
+            ("accuracy", "Accuracy"),
+            *((_service_id(s), s.name) for s in a.services),
+            ("time-series", "Time series"),
+            ("method-notes", "Method notes"),
+            ("summary-data", "Summary data"),
+        ]
+    )
+    return (
+        f'<header><p class="kicker">GNSS integrity verification report</p><h1>{_e(a.title)}</h1>'
+        f'<p class="sub">overbound {_e(__version__)} · counting KPIs for '
+        f"{_e(', '.join(s.name for s in a.services))} · all times GPS time</p>"
+        f'<nav aria-label="Contents"><ul>{links}</ul></nav></header>'
+    )
+
+
+def _duration(start: str | None, end: str | None) -> str:
+    if not start or not end:
+        return "n.a."
+    seconds = float((np.datetime64(end, "ms") - np.datetime64(start, "ms")) / np.timedelta64(1, "s"))
+    days, rest = divmod(seconds, 86400.0)
+    hours, rest = divmod(rest, 3600.0)
+    minutes, secs = divmod(rest, 60.0)
+    text = f"{int(hours):02d}:{int(minutes):02d}:{secs:06.3f}".removesuffix(".000")
+    return f"{int(days)} d {text}" if days else text
+
+
+def _overview(a: Analysis) -> str:
+    c = a.counting
+    no_sol = c.n_total - c.n_with_solution
+    facts = [
+        (
+            "Time span (GPS)",
+            f"{_e(c.start or 'n.a.')} – {_e(c.end or 'n.a.')} ({_e(_duration(c.start, c.end))})",
+        ),
+        (f"Station{'s' if len(c.stations) != 1 else ''}", _e(", ".join(c.stations) or "none")),
+        ("Epochs", f"{c.n_total:,}"),
+        ("with a solution", f"{c.n_with_solution:,} ({_percent(c.n_with_solution, c.n_total)})"),
+        ("without a solution", f"{no_sol:,} ({_percent(no_sol, c.n_total)})"),
+        ("Rows rejected while reading", f"{a.n_rejected:,}"),
+        ("Service levels", _e(", ".join(s.name for s in a.services))),
+    ]
+    dl = '<dl class="facts">' + "".join(f"<dt>{_e(k)}</dt><dd>{v}</dd>" for k, v in facts) + "</dl>"
+    if a.reports:
+        inputs = _table(
+            [
+                "Input",
+                "Format",
+                _num("Rows read"),
+                _num("Rows kept"),
+                _num("Rejected"),
+                _num("Invalidated"),
+                "First bad line",
+                "Notes",
+            ],
+            [
+                [
+                    f"<code>{_e(r.source)}</code>",
+                    _e(r.format),
+                    _num(f"{r.rows_read:,}"),
+                    _num(f"{r.rows_kept:,}"),
+                    _num(f"{r.n_rejected:,}"),
+                    _num(f"{sum(r.invalidated.values()):,}"),
+                    _e(r.first_bad or "none"),
+                    "<br>".join(_e(n) for n in r.notes),
+                ]
+                for r in a.reports
+            ],
+        )
+        drops = []
+        for r in a.reports:
+            rows = [("rejected (removed)", k, v) for k, v in sorted(r.rejected.items())]
+            rows += [("invalidated (kept as no solution)", k, v) for k, v in sorted(r.invalidated.items())]
+            if not rows:
+                rows = [("none", "no row rejected or invalidated", 0)]
+            drops += [
+                [f"<code>{_e(r.source)}</code>", _e(kind), _e(reason), _num(f"{n:,}")]
+                for kind, reason, n in rows
+            ]
+        total_inv = sum(sum(r.invalidated.values()) for r in a.reports)
+        drops.append(
+            [
+                "<strong>Total</strong>",
+                "",
+                "",
+                _num(f"<strong>{a.n_rejected:,} rejected, {total_inv:,} invalidated</strong>"),
+            ]
+        )
+    else:
+        inputs = "<p>The epoch table was passed to the analysis directly: there is no reader report.</p>"
+        drops = [["epoch table", "none", "no reader ran", _num("0")]]
+    drop_table = _table(
+        ["Input", "Kind", "Reason", _num("Rows")],
+        drops,
+        cls="drops",
+        caption="Rejected rows are removed from the table; invalidated rows stay as epochs without a "
+        "solution and count as unavailable. Every row the readers did not keep as read is counted here.",
+    )
+    return _section(
+        "overview",
+        "Overview",
+        f"{dl}\n<h3>Inputs</h3>\n{inputs}\n<h3>Rejected and invalidated rows</h3>\n{drop_table}",
+    )
+
+
+def _accuracy(c: CountingResult) -> str:
+    keys = [f"p{p:g}" for p in SAFETY_PERCENTILES]
+    rows = []
+    for axis, p95 in (("horizontal", c.hpe95), ("vertical", c.vpe95)):
+        si = c.safety[axis]
+        rows.append(
+            [
+                _e(_AXIS_NAMES[axis]),
+                _num(_h_m(p95)),
+                _num(f"{si.n:,}"),
+                _num(_h_ratio(si.max)),
+                _e(si.time_of_max or "n.a."),
+                *(_num(_h_ratio(si.percentiles[k])) for k in keys),
+            ]
+        )
+    head = [
+        "Axis",
+        _num("95th percentile error"),
+        _num("SI epochs"),
+        _num("SI max"),
+        "SI max at (GPS)",
+        *(_num(f"SI {p:g} %") for p in SAFETY_PERCENTILES),
+    ]
+    return _section(
+        "accuracy",
+        "Accuracy",
+        f"<p>Over the {c.n_with_solution:,} epochs with a solution: the 95th percentiles of HPE and |VPE|, "
+        "and the safety index SI = PE/PL (epochs with PL &gt; 0) with its maximum and percentiles. "
+        "SI &gt; 1 is misleading information.</p>\n"
+        + _table(head, rows, caption="Errors in metres; SI is dimensionless."),
+    )
+
+
+def _value(v: Verdict) -> str:
+    if v.value is None:
+        return "n.a."
+    if v.kpi.startswith("availability"):
+        return _h_share(float(v.value))
+    if v.kpi.startswith("continuity"):
+        return _h_sci(float(v.value))
+    if v.kpi.endswith("(m)"):
+        return _h_m(float(v.value))
+    return _h_int(int(v.value))
+
+
+def _requirement(v: Verdict) -> str:
+    if v.required is None:
+        return "none"
+    sign = {">=": "≥", "<=": "≤"}.get(v.comparison, _e(v.comparison))
+    if v.kpi.startswith("availability"):
+        return f"{sign} {_h_share(float(v.required))}"
+    if v.kpi.startswith("continuity"):
+        return f"{sign} {_h_sci(float(v.required))}"
+    if v.kpi.endswith("(m)"):
+        return f"{sign} {float(v.required):g}&nbsp;m"
+    return f"{sign} {_h_int(int(v.required))}"
+
+
+def _availability_counts(k: AxisKPI, n_total: int) -> str:
+    return f"{k.n_available:,} of {n_total:,} epochs with PL below AL"
+
+
+def _continuity_counts(r: ContinuityResult | None) -> str:
+    if r is None:
+        return "n.a."
+    if r.risk is None:
+        return f"not counted: {_e(r.reason)}"
+    parts = [
+        f"{r.n_fail:,} of {r.n_windows:,} windows of {r.window_s:g} s lost service",
+        f"{r.n_gap_windows:,} touched by data gaps",
+        f"{r.n_truncated:,} cut by the end of data (not counted)",
+    ]
+    if r.interval_s is not None:
+        parts.append(f"sampling {r.interval_s:g} s")
+    if r.n_off_grid:
+        parts.append(f"{r.n_off_grid:,} epochs off the time grid")
+    return _e("; ".join(parts))
+
+
+def _kpi_name(kpi: str) -> str:
+    """``continuity risk (combined)`` -> ``Continuity risk``: the axis and unit are shown elsewhere."""
+    name = kpi.removesuffix(" (combined)").removesuffix(" (m)")
+    return name[:1].upper() + name[1:]
+
+
+def _kpi_rows(a: Analysis, s: ServiceLevel, k: ServiceKPI) -> list[list[str]]:
+    n_total = a.counting.n_total
+    pending = list(verdicts(a, s))
+    axes = [k.axis(axis) for axis in AXES if k.axis(axis).alert_limit is not None]
+    rows: list[list[str]] = []
+
+    def verdict_row(kpi: str, axis: str, counts: str, value: str | None = None) -> None:
+        v = next((v for v in pending if v.kpi == kpi), None)
+        if v is None:
+            return
+        pending.remove(v)
+        note = v.note if v.passed is not None or v.note else "not computable"
+        shown = value if value is not None and v.value is not None else _value(v)
+        rows.append(
+            [
+                _e(_kpi_name(v.kpi)),
+                _e(axis),
+                _num(shown),
+                counts or _e(note),
+                _num(_requirement(v)),
+                _h_badge(v.passed, v.kpi, note),
+            ]
+        )
+
+    for x in axes:
+        rows.append(
+            [
+                "Availability",
+                _e(x.axis),
+                _num(_percent(x.n_available, n_total)),
+                _availability_counts(x, n_total),
+                _num("—"),
+                "—",
+            ]
+        )
+    verdict_row(
+        "availability (combined)",
+        "combined",
+        _availability_counts(k.combined, n_total),
+        _percent(k.combined.n_available, n_total),
+    )
+    for x in axes:
+        risk = x.continuity.risk if x.continuity else None
+        rows.append(
+            [
+                "Continuity risk",
+                _e(x.axis),
+                _num(_h_sci(risk)),
+                _continuity_counts(x.continuity),
+                _num("—"),
+                "—",
+            ]
+        )
+    verdict_row("continuity risk (combined)", "combined", _continuity_counts(k.combined.continuity))
+    for v in list(pending):
+        axis = "vertical" if "VPE" in v.kpi else "horizontal" if "HPE" in v.kpi else "both"
+        over = (
+            f"over the {a.counting.n_with_solution:,} epochs with a solution" if v.kpi.endswith("(m)") else ""
+        )
+        verdict_row(v.kpi, axis, over)
+    return rows
+
+
+def _stanford_table(a: Analysis, s: ServiceLevel, k: ServiceKPI) -> str:
+    regions = list(Region)
+    head = [
+        "Axis",
+        _num("AL"),
+        *(_num(_e(REGION_LABELS.get(r, "No solution"))) for r in regions),
+        _num("Total"),
+        _num("Beyond plot"),
+    ]
+    rows = []
+    for axis in AXES:
+        x = k.axis(axis)
+        if x.stanford is None or x.alert_limit is None:
+            continue
+        total = x.stanford.total
+        cells = []
+        for r in regions:
+            n = getattr(x.stanford, r.key)
+            cls = ' class="alarm"' if r in (Region.HMI, Region.UNAVAILABLE_MI, Region.MI) and n else ""
+            cells.append(_num(f"<span{cls}>{n:,}</span><br><small>{_percent(n, total)}</small>"))
+        hist = a.counting.histogram(axis, x.alert_limit)
+        rows.append(
+            [
+                _e(_AXIS_NAMES[axis]),
+                _num(_h_m(x.alert_limit, 0)),
+                *cells,
+                _num(f"{total:,}"),
+                _num(f"{hist.clipped:,}"),
+            ]
+        )
+    swatches = "".join(
+        f'<span class="swatch" style="background:{REGION_COLOURS[r]}"></span>{_e(label)} '
+        for r, label in REGION_LABELS.items()
+    )
+    return _table(head, rows, cls="stanford", caption=f"Epochs per Stanford region. {swatches}")
+
+
+def _service(a: Analysis, s: ServiceLevel) -> str:
+    k = a.counting.services[s.name]
+    limits = f"HAL {s.hal:g} m, " + (f"VAL {s.val:g} m" if s.val is not None else "no vertical alert limit")
+    intro = (
+        f'<p class="limits">{_e(limits)} · integrity risk {_h_sci(s.integrity_risk)} per '
+        f"{s.integrity_exposure_s:g} s · continuity risk {_h_sci(s.continuity_risk)} per "
+        f"{s.continuity_window_s:g} s · availability "
+        f"{_h_share(s.availability)}–{_h_share(s.availability_max)}"
+        f"<br><small>Requirements: {_e(s.source or 'user-defined')}</small></p>"
+    )
+    kpis = _table(
+        ["KPI", "Axis", _num("Value"), "Counts / note", _num("Requirement"), "Verdict"],
+        _kpi_rows(a, s, k),
+        cls="kpi",
+    )
+    figures = []
+    for axis in AXES:
+        x = k.axis(axis)
+        if x.alert_limit is None or x.stanford is None:
+            continue
+        hist = a.counting.histogram(axis, x.alert_limit)
+        ax = plot_stanford(hist, x.stanford, alert_limit=x.alert_limit, service=s.name)
+        figures.append(
+            _render(
+                ax,
+                f"stanford-{s.name}-{axis}",
+                f"Stanford diagram of {s.name}, {axis}: {_PE[axis]} against {_PL[axis]} with alert limit "
+                f"{x.alert_limit:g} m; {x.stanford.hmi:,} HMI, {x.stanford.mi:,} MI epochs",
+                f"Stanford diagram, {s.name} {axis} (AL {x.alert_limit:g} m).",
+            )
+        )
+    figs = '<div class="figrow">' + "".join(f.html() for f in figures) + "</div>"
+    return _section(
+        _service_id(s),
+        s.name,
+        f"{intro}\n<h3>KPIs against requirements</h3>\n{kpis}\n"
+        f"<h3>Stanford regions</h3>\n{_stanford_table(a, s, k)}\n{figs}",
+    )
+
+
+def _strictest(services: tuple[ServiceLevel, ...], axis: str) -> tuple[float | None, list[str]]:
+    limits = [(s.alert_limit(axis), s.name) for s in services if s.alert_limit(axis) is not None]
+    if not limits:
+        return None, []
+    al = min(v for v, _ in limits)
+    return al, [n for v, n in limits if v == al]
+
+
+def _time_series(a: Analysis) -> str:
+    series, hists = [], []
+    for axis in AXES:
+        al, names = _strictest(a.services, axis)
+        which = (
+            f"AL {al:g} m ({', '.join(names)}, the most stringent analysed)" if al is not None else "no AL"
+        )
+        ax = plot_timeseries(a.table, axis=axis, alert_limit=al)
+        series.append(
+            _render(
+                ax,
+                f"timeseries-{axis}",
+                f"Time series of {_PE[axis]} and {_PL[axis]} against GPS time with {which}",
+                f"{_PE[axis]} and {_PL[axis]} against GPS time, {which}. Long series are drawn as the "
+                "per-pixel minimum/maximum envelope.",
+            )
+        )
+        ax = plot_safety_index(a.table, axis=axis)
+        hists.append(
+            _render(
+                ax,
+                f"safety-index-{axis}",
+                f"Histogram of the safety index {_PE[axis]}/{_PL[axis]} on a log count scale, SI = 1 marked",
+                f"Safety index {_PE[axis]}/{_PL[axis]}: epochs per bin (log scale); "
+                "SI > 1 is misleading information.",
+            )
+        )
+    content = (
+        "".join(f.html() for f in series)
+        + '<div class="figrow">'
+        + "".join(f.html() for f in hists)
+        + "</div>"
+    )
+    return _section("time-series", "Time series", content)
+
+
+#: Method notes: (term, definition); ``{bins}`` is the Stanford histogram's bin count.
+_NOTES: tuple[tuple[str, str], ...] = (
+    (
+        "Time base",
+        "All times are GPS time (GPST: continuous, no leap seconds). Readers convert inputs tagged in"
+        " UTC by adding the GPS−UTC leap seconds. ISO 8601 times in this report carry no time-zone "
+        "suffix.",
+    ),
+    (
+        "Epochs",
+        "One row per receiver epoch. An epoch has a solution when HPE, VPE, HPL and VPL are all "
+        "finite; epochs without a solution stay in the table and count as unavailable for every "
+        "service. Errors are estimate minus truth in the local east-north-up frame of the reference "
+        "position.",
+    ),
+    (
+        "Availability",
+        "The share of all epochs, with or without a solution, whose protection level is below the "
+        "alert limit: HPL < HAL, VPL < VAL; combined needs both. PL = AL is unavailable. A service "
+        "without a VAL (NPA) is horizontal only.",
+    ),
+    (
+        "Continuity risk",
+        "Counted over sliding windows as in Kannemans (2006), section 2.1.4: P = N_fail / (N_success "
+        "+ N_fail). A window starts at every available epoch and covers the exposure time T after it "
+        "(15 s for approaches, 3600 s for NPA); it fails when any epoch in (t, t + T] is unavailable "
+        "or missing. The epochs are placed on a regular grid with the median epoch spacing; a grid "
+        "slot without an epoch (a data gap) counts as loss of service. Windows that would run past "
+        "the end of the data are not counted, and windows never span two stations. When the sampling "
+        "interval exceeds T no window can be counted and the risk is n.a., with the reason.",
+    ),
+    (
+        "Stanford regions",
+        "Per axis and alert limit AL, with PE the absolute error and PL the protection level: PL ≥ AL"
+        " is system unavailable (PE ≤ PL) or unavailable & MI (PE > PL); with PL < AL an epoch is HMI"
+        " when PE > AL, MI when PL < PE ≤ AL, and normal operation when PE ≤ PL. Ties: PE = PL is "
+        "bounded (normal), PL = AL is unavailable, PE = AL is not hazardous. Percentages are of all "
+        "epochs, including those without a solution, which the diagrams do not draw. The diagrams use"
+        " {bins} × {bins} square bins from 0 to 1.5 AL rounded up to 10 m, with a logarithmic colour "
+        "scale; epochs beyond the range are drawn in the border bins and counted.",
+    ),
+    (
+        "Percentiles",
+        "HPE95, |VPE|95 and the safety-index percentiles interpolate linearly between order "
+        "statistics (Hyndman and Fan type 7, numpy's default), over the epochs with a solution (and "
+        "PL > 0 for the safety index SI = PE/PL).",
+    ),
+    (
+        "Verdicts",
+        "PASS or FAIL compares a KPI with the requirement of the service level; n.a. means the KPI "
+        "could not be computed or the service states no requirement. Availability uses the lower end "
+        "of the ICAO range. The integrity verdict here is only the count of HMI epochs: an integrity "
+        "risk of the order of 2·10⁻⁷ per approach cannot be shown by counting and needs the "
+        "statistical methods.",
+    ),
+    (
+        "Time series",
+        "Drawn as the minimum/maximum of each time bin (about one bin per pixel column), which marks "
+        "the same pixels as the raw series; lines break at data gaps of two sampling intervals or "
+        "more.",
+    ),
+)
+#: Plain-text citations of the method notes (no links: the page loads nothing).
+_REFERENCES: tuple[str, ...] = (
+    "ICAO Annex 10, Volume I (7th ed., 2018), Table 3.7.2.4-1, Signal-in-space performance requirements.",
+    "RTCA DO-229E (2016), Minimum Operational Performance Standards for GPS/SBAS airborne equipment, 2.2.4.",
+    "Kannemans, H. (2006), Integrity, availability and continuity of EGNOS, NLR-TP-2006-594, section 2.1.4.",
+    "Tossaint, M. et al. (2006), The Stanford-ESA integrity diagram: focusing on SBAS integrity, ION "
+    "GNSS 2006.",
+    "Hyndman, R. J., Fan, Y. (1996), Sample quantiles in statistical packages, The American "
+    "Statistician 50(4), 361–365.",
+)
+
+
+def _method_notes(c: CountingResult) -> str:
+    bins = next(iter(c.histograms.values())).counts.shape[0] if c.histograms else 200
+    dl = "".join(f"<dt>{_e(k)}</dt><dd>{_e(v.replace('{bins}', str(bins)))}</dd>" for k, v in _NOTES)
+    ol = "".join(f"<li>{_e(r)}</li>" for r in _REFERENCES)
+    return _section(
+        "method-notes",
+        "Method notes",
+        f'<dl class="notes">{dl}</dl>\n<h3>References</h3>\n<ol class="refs">{ol}</ol>',
+    )
+
+
+_CSS = """
+:root{--ink:#1d2733;--muted:#5b6673;--line:#d5dbe1;--band:#f4f6f8;--accent:#1f5fa8;
+--pass:#1b7a3a;--pass-bg:#e3f4e8;--fail:#b3261e;--fail-bg:#fbe4e2;--na:#5b6673;--na-bg:#eceff2}
+*{box-sizing:border-box}
+html{font-size:15px}
+body{margin:0;color:var(--ink);background:#fff;
+font-family:system-ui,-apple-system,"Segoe UI",Roboto,"Helvetica Neue","DejaVu Sans",Arial,sans-serif;
+line-height:1.45}
+main{max-width:1180px;margin:0 auto;padding:0 24px 48px}
+header{border-bottom:3px solid var(--accent);padding:28px 0 14px;margin-bottom:8px}
+.kicker{margin:0;color:var(--accent);font-weight:600;letter-spacing:.06em;text-transform:uppercase;font-size:.8rem}
+h1{margin:.15em 0 .1em;font-size:1.9rem;overflow-wrap:anywhere}
+.sub{margin:0 0 12px;color:var(--muted)}
+nav ul{list-style:none;margin:0;padding:0;display:flex;flex-wrap:wrap;gap:6px}
+nav a{display:inline-block;padding:3px 10px;border:1px solid var(--line);border-radius:14px;
+color:var(--accent);text-decoration:none;font-size:.85rem;background:var(--band)}
+section{padding:18px 0 8px;border-bottom:1px solid var(--line)}
+h2{font-size:1.4rem;margin:.3em 0 .5em;color:var(--ink)}
+h3{font-size:1.05rem;margin:1.2em 0 .4em;color:var(--muted)}
+p{max-width:75em}
+code{font-family:ui-monospace,"DejaVu Sans Mono",Menlo,Consolas,monospace;font-size:.9em}
+dl.facts{display:grid;grid-template-columns:max-content 1fr;gap:3px 18px;margin:0 0 8px}
+dl.facts dt{color:var(--muted)}
+dl.facts dd{margin:0;font-variant-numeric:tabular-nums}
+table{border-collapse:collapse;margin:6px 0 12px;font-size:.9rem;font-variant-numeric:tabular-nums;width:100%}
+caption{caption-side:bottom;text-align:left;color:var(--muted);font-size:.8rem;padding-top:4px}
+th,td{border-bottom:1px solid var(--line);padding:4px 8px;text-align:left;vertical-align:top}
+th{background:var(--band);font-weight:600;border-bottom:2px solid var(--line);white-space:nowrap}
+tbody tr:nth-child(even){background:#fafbfc}
+.num{text-align:right;white-space:nowrap}
+td small{color:var(--muted)}
+.alarm{color:var(--fail);font-weight:700}
+.badge{display:inline-block;min-width:3.6em;text-align:center;padding:1px 8px;border-radius:10px;
+font-weight:700;font-size:.78rem;letter-spacing:.04em;border:1px solid}
+.badge.pass{color:var(--pass);background:var(--pass-bg);border-color:var(--pass)}
+.badge.fail{color:var(--fail);background:var(--fail-bg);border-color:var(--fail)}
+.badge.na{color:var(--na);background:var(--na-bg);border-color:#b8c0c8}
+.limits{color:var(--muted)}
+.swatch{display:inline-block;width:.9em;height:.9em;border:1px solid #999;margin:0 3px 0 8px;
+vertical-align:-1px}
+figure{margin:8px 0;break-inside:avoid}
+figure img{max-width:100%;height:auto;display:block;border:1px solid var(--line)}
+figcaption{color:var(--muted);font-size:.8rem;margin-top:3px}
+.figrow{display:grid;grid-template-columns:repeat(auto-fit,minmax(360px,1fr));gap:14px;align-items:start}
+dl.notes dt{font-weight:600;margin-top:.7em}
+dl.notes dd{margin:.15em 0 0;max-width:75em}
+ol.refs{font-size:.88rem;color:var(--muted)}
+details pre{background:var(--band);padding:10px;overflow:auto;max-height:40em;font-size:.75rem}
+@media print{
+html{font-size:10.5pt}
+main{max-width:none;padding:0}
+nav,#summary-data{display:none}
+section{break-inside:auto;border:none}
+section[id^="service-"],#time-series,#method-notes{break-before:page}
+table,figure,tr{break-inside:avoid}
+th{white-space:normal}
+.badge,th,.swatch,tbody tr{-webkit-print-color-adjust:exact;print-color-adjust:exact}
+}
+@page{size:A4;margin:14mm}
+"""

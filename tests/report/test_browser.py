@@ -1,0 +1,126 @@
+"""report.html in a real browser: headless Debian Chromium through Selenium, offline.
+
+Skips when Chromium, ChromeDriver or Selenium is missing, unless ``OVERBOUND_REQUIRE_BROWSER=1``
+(CI), in which case it fails. The driver is the system one (``/usr/bin/chromedriver``), so
+Selenium Manager downloads nothing, and Chromium's background networking is off.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import polars as pl
+import pytest
+
+from overbound.analysis import analyze
+from overbound.report.html import section_ids, write_report
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMEDRIVER = Path("/usr/bin/chromedriver")
+FLAGS = (
+    "--headless=new",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-dev-shm-usage",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+)
+WIDTH = 1280
+
+pytestmark = pytest.mark.browser
+
+
+def _unavailable(reason: str) -> None:
+    if os.environ.get("OVERBOUND_REQUIRE_BROWSER") == "1":
+        pytest.fail(f"OVERBOUND_REQUIRE_BROWSER=1 but {reason}")
+    pytest.skip(reason)
+
+
+@pytest.fixture
+def driver(tmp_path):
+    missing = [str(p) for p in (CHROMIUM, CHROMEDRIVER) if not p.exists()]
+    if missing:
+        _unavailable(f"{' and '.join(missing)} not installed (apt-get install chromium chromium-driver)")
+    try:
+        from selenium import webdriver
+        from selenium.webdriver.chrome.service import Service
+    except ImportError:
+        _unavailable("selenium is not installed (pip install -e '.[test]')")
+    options = webdriver.ChromeOptions()
+    options.binary_location = str(CHROMIUM)
+    for flag in FLAGS:
+        options.add_argument(flag)
+    options.add_argument(f"--user-data-dir={tmp_path / 'chromium-profile'}")
+    options.add_argument(f"--window-size={WIDTH},1000")
+    browser = webdriver.Chrome(options=options, service=Service(str(CHROMEDRIVER)))
+    try:
+        yield browser
+    finally:
+        browser.quit()
+
+
+def _table() -> pl.DataFrame:
+    """A day at 1 Hz with a VPL excursion above 35 m and a gap, so every figure has something to show."""
+    rng = np.random.default_rng(11)
+    n = 86_400
+    k = np.arange(n)
+    time = np.datetime64("2006-12-27T00:00:00", "us") + (k * 1_000_000).astype("timedelta64[us]")
+    vpl = 20 + 6 * np.abs(np.sin(k / 7000)) + rng.gamma(2.0, 1.0, n)
+    vpl[30_000:30_300] = 42.0
+    table = pl.DataFrame(
+        {
+            "time": time,
+            "station": "USLO",
+            "hpe": np.hypot(rng.normal(0, 0.8, n), rng.normal(0, 0.8, n)),
+            "vpe": rng.normal(0, 1.2, n),
+            "hpl": 12 + 4 * np.abs(np.sin(k / 5000)) + rng.gamma(2.0, 1.0, n),
+            "vpl": vpl,
+        }
+    )
+    return table.filter((pl.int_range(pl.len()) < 60_000) | (pl.int_range(pl.len()) >= 63_600))
+
+
+def test_report_renders_in_chromium(driver, tmp_path):
+    from selenium.webdriver.common.by import By
+
+    analysis = analyze(
+        _table(), services=["NPA", "LPV", "LPV-200", "CAT-I"], title="USLO 2006-361 (synthetic)"
+    )
+    path = write_report(analysis, tmp_path)
+    driver.get(path.resolve().as_uri())
+    assert driver.execute_script("return document.readyState") == "complete"
+
+    assert driver.title == "USLO 2006-361 (synthetic) — overbound integrity report"
+    for sid in section_ids(analysis):
+        section = driver.find_element(By.ID, sid)
+        assert section.is_displayed(), sid
+        assert section.find_element(By.TAG_NAME, "h2").is_displayed(), sid
+
+    images = driver.execute_script(
+        "return Array.from(document.images).map(i => "
+        "[i.dataset.figure, i.complete, i.naturalWidth, i.naturalHeight, i.getBoundingClientRect().width])"
+    )
+    assert len(images) == 1 + 2 + 2 + 2 + 4
+    for name, complete, width, height, shown in images:
+        assert complete and width > 0 and height > 0, name
+        assert 0 < shown <= WIDTH, name  # scaled to the page, never wider than the window
+    # the page loaded nothing but itself
+    assert driver.execute_script("return performance.getEntriesByType('resource').length") == 0
+    # two Stanford diagrams side by side: same row, different columns
+    rects = driver.execute_script(
+        "return ['horizontal', 'vertical'].map(a => document.querySelector("
+        "`img[data-figure='stanford-LPV-200-${a}']`).getBoundingClientRect().toJSON())"
+    )
+    assert rects[0]["top"] == rects[1]["top"] and rects[0]["right"] <= rects[1]["left"]
+    badges = [b.text for b in driver.find_elements(By.CSS_SELECTOR, "#service-LPV-200 .badge")]
+    assert badges == ["PASS", "FAIL", "PASS", "PASS", "PASS"]  # the VPL excursion breaks continuity
+
+    height = driver.execute_script("return document.documentElement.scrollHeight")
+    driver.set_window_size(WIDTH, min(height + 120, 16_000))
+    shot = tmp_path / "report.png"
+    assert driver.save_screenshot(str(shot))
+    assert shot.stat().st_size > 50_000
