@@ -165,6 +165,7 @@ def _run_analysis(
             station=station,
             strict=strict,
             title=title,
+            columns=None if epochs_out else (),  # the epoch table written keeps every column
             progress=step,
         )
         out_dir.mkdir(parents=True, exist_ok=True)

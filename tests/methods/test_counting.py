@@ -192,3 +192,36 @@ def test_count_kpis_pools_continuity_over_stations():
     assert c.n_windows == a.n_windows + b.n_windows
     assert c.n_fail == a.n_fail == 15
     assert res.stations == ("A", "B")
+
+
+def test_counts_equal_bincount_of_regions():
+    rng = np.random.default_rng(7)
+    pe = np.abs(rng.normal(0, 20, 20_000))
+    pl_ = rng.uniform(0, 80, 20_000)
+    pe[::53] = np.nan
+    pl_[::71] = np.nan
+    pe[::89] = pl_[::89]  # ties PE == PL
+    pl_[::97] = AL  # ties PL == AL
+    codes = np.bincount(stanford_regions(pe, pl_, AL), minlength=len(Region))
+    assert stanford_counts(pe, pl_, AL).to_dict() == {r.key: int(codes[r]) for r in Region}
+
+
+def test_histogram_matches_histogram2d():
+    rng = np.random.default_rng(11)
+    pe = rng.normal(0, 15, 30_000)  # signed: the histogram takes |PE|
+    pl_ = rng.uniform(0, 70, 30_000)
+    pe[::41] = np.nan
+    h = stanford_histogram(pe, pl_, axis="vertical", max_value=60.0, bins=50)
+    ok = ~np.isnan(pe)
+    ref, _, _ = np.histogram2d(
+        np.minimum(np.abs(pe[ok]), 59.999), np.minimum(pl_[ok], 59.999), bins=50, range=[[0, 60], [0, 60]]
+    )
+    np.testing.assert_array_equal(h.counts, ref.astype(np.int64))
+
+
+def test_grid_with_jitter_and_gaps():
+    t = np.arange(0, 600) * 1_000_000 + np.tile([0, 30_000, -20_000], 200)  # +-30 ms jitter
+    t = np.delete(t, [100, 101, 102])
+    res = continuity_risk(t, np.ones(t.size, bool), window_s=15)
+    assert res.interval_s == pytest.approx(1.0, abs=0.03) and res.n_off_grid == 0
+    assert res.n_gap_windows == 15  # windows starting at slots 85..99 reach into the gap 100-102

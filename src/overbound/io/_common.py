@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import polars as pl
 
-from overbound.io.schema import COLUMNS, InputError, ReadReport
+from overbound.io.schema import COLUMNS, InputError, ReadReport, as_numpy
 
 _DTYPES = {c.name: c.dtype for c in COLUMNS}
 _SOLUTION = ("hpe", "vpe", "hpl", "vpl", "east", "north")
@@ -87,11 +87,11 @@ def finalize_epochs(
 def _drop_duplicates_or_raise(df: pl.DataFrame, log: RowLog) -> pl.DataFrame:
     if df.height < 2:
         return df
-    t = df["time"].dt.epoch("us").to_numpy()
     # Categorical codes compare like the names, without materialising millions of strings.
-    st = df["station"].cast(pl.Categorical()).to_physical().to_numpy()
+    st = as_numpy(df["station"].cast(pl.Categorical()).to_physical())
     same = np.concatenate([[False], st[1:] == st[:-1]])
-    dt = np.concatenate([[1], np.diff(t)])
+    del st
+    dt = np.diff(as_numpy(df["time"]), prepend=0)
     back = np.flatnonzero(same & (dt < 0))
     if back.size:
         i = int(back[0])
@@ -115,35 +115,27 @@ def _drop_duplicates_or_raise(df: pl.DataFrame, log: RowLog) -> pl.DataFrame:
 
 
 def _invalidate(df: pl.DataFrame, log: RowLog) -> tuple[pl.DataFrame, dict[str, int]]:
-    pl_cols = [pl.col("hpl"), pl.col("vpl")]
-    err_cols = [pl.col(c) for c in ("hpe", "vpe")]
-    all_nan = pl.all_horizontal([c.is_nan() | c.is_null() for c in pl_cols + err_cols])
-    neg = pl.any_horizontal([c < 0 for c in pl_cols])
-    nan_pl = pl.any_horizontal([c.is_nan() | c.is_null() for c in pl_cols])
-    nan_err = pl.any_horizontal([c.is_nan() | c.is_null() for c in err_cols])
+    missing = [pl.col(c).is_nan().fill_null(True) for c in ("hpl", "vpl", "hpe", "vpe")]
+    all_nan = pl.all_horizontal(missing)
+    neg = pl.any_horizontal([(pl.col(c) < 0).fill_null(False) for c in ("hpl", "vpl")])
+    nan_pl = pl.any_horizontal(missing[:2])
+    nan_err = pl.any_horizontal(missing[2:])
+    invalid = ~all_nan & (neg | nan_pl | nan_err)
+    # One boolean pass over the table; reasons are spelled out only for the (few) bad rows.
+    if not df.select(invalid.any()).item():
+        return df, {}
     reason = (
-        pl.when(all_nan)
-        .then(pl.lit(None, pl.String))
-        .when(neg)
+        pl.when(neg)
         .then(pl.lit("negative_pl"))
         .when(nan_pl)
         .then(pl.lit("nan_pl"))
-        .when(nan_err)
-        .then(pl.lit("nan_error"))
-        .otherwise(pl.lit(None, pl.String))
+        .otherwise(pl.lit("nan_error"))
     )
-    df = df.with_columns(reason.alias("_invalid"))
-    bad = df.filter(pl.col("_invalid").is_not_null())
-    if bad.height == 0:
-        return df.drop("_invalid"), {}
-    counts = dict(bad.group_by("_invalid").len().sort("_invalid").iter_rows())
-    log._first(int(bad["_line"][0]), f"{bad['_invalid'][0]}: solution set to no-solution")
+    bad = df.filter(invalid).select(pl.col("_line"), reason.alias("reason"))
+    counts = dict(bad.group_by("reason").len().sort("reason").iter_rows())
+    log._first(int(bad["_line"][0]), f"{bad['reason'][0]}: solution set to no-solution")
     nan = pl.lit(float("nan"))
     df = df.with_columns(
-        [
-            pl.when(pl.col("_invalid").is_not_null()).then(nan).otherwise(pl.col(c)).alias(c)
-            for c in _SOLUTION
-            if c in df.columns
-        ]
-    ).drop("_invalid")
+        [pl.when(invalid).then(nan).otherwise(pl.col(c)).alias(c) for c in _SOLUTION if c in df.columns]
+    )
     return df, counts

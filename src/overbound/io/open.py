@@ -11,14 +11,14 @@ import datetime as dt
 import gzip
 import io
 import re
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import BinaryIO, TextIO
 
 import polars as pl
 
 from overbound.io.geodesy import Reference
-from overbound.io.schema import InputError, ReadReport
+from overbound.io.schema import REQUIRED, InputError, ReadReport
 
 __all__ = ["FORMATS", "Source", "open_binary", "open_text", "read", "sniff", "source_name"]
 
@@ -154,6 +154,7 @@ def read(
     station: str | None = None,
     mapping: Mapping[str, str] | None = None,
     time_range: tuple[dt.datetime | None, dt.datetime | None] | None = None,
+    columns: Sequence[str] | None = None,
     strict: bool = False,
 ) -> tuple[pl.DataFrame, ReadReport]:
     """Read any supported input into the epoch table.
@@ -166,6 +167,8 @@ def read(
     station : station name; by default the reader takes it from the content or the file name.
     mapping : for ``csv``/``parquet``: canonical column name -> column name in the file.
     time_range : keep epochs with ``start <= time < stop`` (GPS time); either end may be ``None``.
+    columns : optional columns to keep besides the required ones (default: all the input has);
+        a Parquet input does not even read the others.
     strict : raise on the first malformed row instead of counting it.
 
     Returns
@@ -180,7 +183,12 @@ def read(
     kwargs: dict = {"reference": reference, "station": station, "strict": strict}
     if fmt in ("csv", "parquet"):
         kwargs["mapping"] = mapping
+    if fmt == "parquet":
+        kwargs["columns"] = columns
     table, report = readers[fmt](source, **kwargs)
+    if columns is not None:
+        keep = set(REQUIRED) | set(columns)
+        table = table.select([c for c in table.columns if c in keep])
     if time_range is not None:
         table = _filter_time(table, time_range)
     return table, report

@@ -13,7 +13,7 @@ import gzip
 import io
 import json
 import re
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -60,6 +60,7 @@ def read_parquet(
     station: str | None = None,
     strict: bool = False,
     mapping: Mapping[str, str] | None = None,
+    columns: Sequence[str] | None = None,
 ) -> tuple[pl.DataFrame, ReadReport]:
     """Read a Parquet epoch table.
 
@@ -74,6 +75,8 @@ def read_parquet(
     mapping : canonical name -> column name in the file, e.g. ``{"vpl": "VPL_m"}``;
         canonical names are those of :data:`overbound.io.schema.COLUMNS` and
         :data:`INPUT_COLUMNS`.
+    columns : optional epoch-table columns to read besides the required ones (default:
+        all); the others are not read from disk at all, which matters for big tables.
 
     Returns
     -------
@@ -107,7 +110,9 @@ def read_parquet(
         meta = pl.read_parquet_metadata(data).get(METADATA_KEY)
         names = list(pl.read_parquet_schema(data))
         # Only the columns the epoch table can use: simulator truth and the like stay on disk.
-        wanted = set(_CANONICAL + INPUT_COLUMNS) | set((mapping or {}).values())
+        keep = _CANONICAL if columns is None else (*REQUIRED, *columns)
+        mapping = dict(mapping or {})
+        wanted = {mapping.get(c, c) for c in (*keep, *INPUT_COLUMNS)}
         used = [c for c in names if c in wanted]
         raw = pl.read_parquet(data, columns=used or None)
     except Exception as exc:  # polars raises several types for a bad file
@@ -119,7 +124,7 @@ def read_parquet(
         notes.append(f"written by overbound {version} from {src} ({fmt})")
     unread = [c for c in names if c not in used]
     if unread:
-        notes.append(f"columns not in the epoch table dropped: {', '.join(unread)}")
+        notes.append(f"columns not read: {', '.join(unread)}")
     lines = pl.Series("_line", np.arange(1, raw.height + 1, dtype=np.int64))
     return _to_epochs(raw, lines, name, "parquet", reference, station, strict, mapping, tuple(notes))
 

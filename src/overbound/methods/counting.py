@@ -16,6 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 import polars as pl
 
+from overbound.io.schema import as_numpy
 from overbound.services import ServiceLevel
 
 __all__ = [
@@ -130,7 +131,7 @@ class ContinuityResult:
     n_gap_windows : windows touched by at least one missing epoch (a gap) after the start.
     n_truncated : available start epochs whose window runs past the end of the data (not counted).
     window_s : exposure time (s).
-    interval_s : nominal sampling interval found (median epoch spacing, s).
+    interval_s : nominal sampling interval found (s; see :func:`continuity_risk`).
     n_off_grid : epochs more than a quarter interval off the regular time grid (rounded onto it).
     reason : why ``risk`` is ``None`` (empty otherwise).
     """
@@ -238,9 +239,35 @@ def stanford_regions(pe: np.ndarray, pl_: np.ndarray, alert_limit: float) -> np.
 
 
 def stanford_counts(pe: np.ndarray, pl_: np.ndarray, alert_limit: float) -> StanfordCounts:
-    """Epoch counts per Stanford region (see :class:`Region` for the boundaries)."""
-    counts = np.bincount(stanford_regions(pe, pl_, alert_limit), minlength=len(Region))
-    return StanfordCounts(**{r.key: int(counts[r]) for r in Region})
+    """Epoch counts per Stanford region (see :class:`Region` for the boundaries).
+
+    Equal to ``np.bincount(stanford_regions(...))`` (tested), computed from boolean
+    masks without the per-epoch code array.
+    """
+    pe, pl_ = np.asarray(pe, dtype=float), np.asarray(pl_, dtype=float)
+    return _counts(pe, pl_, alert_limit, np.isnan(pe) | np.isnan(pl_), pe > pl_)
+
+
+def _counts(
+    pe: np.ndarray, pl_: np.ndarray, al: float, no_solution: np.ndarray, above: np.ndarray
+) -> StanfordCounts:
+    """Region counts given the AL-independent masks (shared by every service of an axis)."""
+    avail = pl_ < al
+    avail &= ~no_solution
+    n_avail = int(np.count_nonzero(avail))
+    n_mi_all = int(np.count_nonzero(avail & above))
+    n_hmi = int(np.count_nonzero(avail & (pe > al)))  # PE > AL > PL: a subset of ``above``
+    n_nosol = int(np.count_nonzero(no_solution))
+    n_unavail = pe.size - n_avail - n_nosol
+    n_unavail_mi = int(np.count_nonzero(above)) - n_mi_all  # NaN compares False: above excludes no-solution
+    return StanfordCounts(
+        normal=n_avail - n_mi_all,
+        mi=n_mi_all - n_hmi,
+        hmi=n_hmi,
+        unavailable=n_unavail - n_unavail_mi,
+        unavailable_mi=n_unavail_mi,
+        no_solution=n_nosol,
+    )
 
 
 def availability(pl_: np.ndarray, alert_limit: float) -> tuple[float | None, int]:
@@ -258,19 +285,34 @@ def plot_max(alert_limit: float) -> float:
 def stanford_histogram(
     pe: np.ndarray, pl_: np.ndarray, *, axis: str, max_value: float, bins: int = 200
 ) -> StanfordHistogram:
-    """2-D (PE, PL) histogram on ``[0, max_value]`` with ``bins`` square bins.
+    """2-D (|PE|, PL) histogram on ``[0, max_value]`` with ``bins`` square bins.
 
     Epochs beyond ``max_value`` go to the last bin and are counted in ``clipped``;
-    no-solution epochs are left out. One pass of ``np.bincount``, no ``histogram2d``.
+    no-solution epochs are left out. One ``np.bincount`` over a flat index, no
+    ``histogram2d``; no-solution epochs go to an extra row and column that is cut off.
     """
-    ok = ~(np.isnan(pe) | np.isnan(pl_))
-    pe, pl_ = np.abs(pe[ok]), pl_[ok]
-    width = max_value / bins
-    i = np.minimum((pe / width).astype(np.int64), bins - 1)
-    j = np.minimum((pl_ / width).astype(np.int64), bins - 1)
+    pe = np.abs(np.asarray(pe, dtype=float))
+    pl_ = np.asarray(pl_, dtype=float)
+    nan = np.isnan(pe) | np.isnan(pl_)
+    stride = bins + 1  # index ``bins`` is the discard row/column
+    scale = bins / max_value
+    tmp = np.empty(pe.shape, dtype=float)
+    flat = _bin_index(pe, scale, bins, nan, tmp)
+    flat *= stride
+    flat += _bin_index(pl_, scale, bins, nan, tmp)
+    counts = np.bincount(flat, minlength=stride * stride).reshape(stride, stride)[:bins, :bins]
     clipped = int(np.count_nonzero((pe >= max_value) | (pl_ >= max_value)))
-    counts = np.bincount(i * bins + j, minlength=bins * bins).reshape(bins, bins)
-    return StanfordHistogram(axis, np.linspace(0.0, max_value, bins + 1), counts, clipped)
+    return StanfordHistogram(
+        axis, np.linspace(0.0, max_value, bins + 1), np.ascontiguousarray(counts), clipped
+    )
+
+
+def _bin_index(x: np.ndarray, scale: float, bins: int, nan: np.ndarray, tmp: np.ndarray) -> np.ndarray:
+    """floor(x * scale) clipped to the last bin; ``bins`` where ``nan``; in place in ``tmp``."""
+    np.multiply(x, scale, out=tmp)
+    np.minimum(tmp, bins - 1, out=tmp)
+    np.putmask(tmp, nan, bins)
+    return tmp.astype(np.intp)
 
 
 def safety_index(pe: np.ndarray, pl_: np.ndarray, time_us: np.ndarray | None = None) -> SafetyIndex:
@@ -280,18 +322,29 @@ def safety_index(pe: np.ndarray, pl_: np.ndarray, time_us: np.ndarray | None = N
     type 7, numpy's default).
     """
     ok = np.isfinite(pe) & np.isfinite(pl_) & (pl_ > 0)
-    si = np.abs(pe[ok]) / pl_[ok]
+    si = pe[ok]
+    np.abs(si, out=si)
+    si /= pl_[ok]
     keys = [f"p{p:g}" for p in SAFETY_PERCENTILES]
     if si.size == 0:
         return SafetyIndex(0, None, None, dict.fromkeys(keys))
-    q = np.percentile(si, SAFETY_PERCENTILES)
     imax = int(np.argmax(si))
-    when = None
-    if time_us is not None:
-        when = _iso(int(np.asarray(time_us)[ok][imax]))
-    return SafetyIndex(
-        int(si.size), float(si[imax]), when, {k: float(v) for k, v in zip(keys, q, strict=True)}
-    )
+    si_max = float(si[imax])
+    when = None if time_us is None else _iso(int(np.asarray(time_us)[_nth_true(ok, imax)]))
+    q = np.percentile(si, SAFETY_PERCENTILES, overwrite_input=True)  # si is our own copy
+    return SafetyIndex(int(si.size), si_max, when, {k: float(v) for k, v in zip(keys, q, strict=True)})
+
+
+def _nth_true(mask: np.ndarray, n: int, block: int = 1 << 20) -> int:
+    """Index of the ``n``-th (0-based) True of ``mask``, by blocks: no index array of the whole mask.
+
+    >>> _nth_true(np.array([False, True, False, True, True]), 1, block=2)
+    3
+    """
+    starts = np.arange(0, mask.size, block)
+    before = np.concatenate(([0], np.cumsum(np.add.reduceat(mask, starts, dtype=np.int64))))
+    b = int(np.searchsorted(before, n, side="right")) - 1
+    return int(starts[b] + np.flatnonzero(mask[starts[b] : starts[b] + block])[n - before[b]])
 
 
 def _iso(us: int) -> str:
@@ -320,11 +373,22 @@ def _grid(time_us: np.ndarray) -> _Grid | None:
     steps = steps[steps > 0]
     if steps.size == 0:
         return None
-    # polars' median: numpy's introselect degrades on millions of equal steps with a few large ones
-    dt = float(pl.Series(steps).median())
-    rel = (time_us - time_us[0]) / dt
-    k = np.rint(rel).astype(np.int64)
-    off = int(np.count_nonzero(np.abs(rel - k) > 0.25))
+    # Nominal interval: the mean of the steps within 25 % of the median step, so that gaps
+    # are left out and time-tag jitter averages away. (polars' median: numpy's introselect
+    # degrades on millions of equal steps with a few large ones.)
+    st = pl.Series(steps)
+    med = st.median()
+    dt = round(st.filter((st - med).abs() <= med / 4).mean())
+    del steps, st
+    # nearest grid slot, in integers and in place (no float temporaries of the whole series)
+    k = time_us - (time_us[0] - dt // 2)
+    k //= dt
+    resid = k * dt
+    np.subtract(time_us, resid, out=resid)
+    resid -= time_us[0]
+    np.abs(resid, out=resid)
+    off = int(np.count_nonzero(resid > dt // 4))
+    del resid
     size = int(k[-1]) + 1
     empty = np.ones(size, dtype=bool)
     empty[k] = False
@@ -357,8 +421,9 @@ def continuity_risk(time_us: np.ndarray, available: np.ndarray, *, window_s: flo
 
     with exposure ``T = window_s``. Steps:
 
-    1. The nominal interval Δ is the median positive epoch spacing; each epoch is put on
-       the grid ``k = round((t - t_0)/Δ)``.
+    1. The nominal interval Δ is the mean of the epoch spacings within 25 % of the median
+       spacing (gaps left out, jitter averaged); each epoch is put on the grid
+       ``k = round((t - t_0)/Δ)``; epochs more than Δ/4 off it are counted in ``n_off_grid``.
     2. A window starts at every available epoch and holds the ``round(T/Δ)`` grid slots
        after it. A slot with no epoch (a gap) counts as loss of service, as does an
        unavailable epoch.
@@ -450,11 +515,12 @@ def count_kpis(
     A service without a vertical alert limit (NPA) has null vertical KPIs and its
     combined KPIs equal the horizontal ones.
     """
-    hpe = table["hpe"].to_numpy()
-    vpe = np.abs(table["vpe"].to_numpy())
-    hpl = table["hpl"].to_numpy()
-    vpl = table["vpl"].to_numpy()
-    time_us = table["time"].dt.epoch("us").to_numpy()
+    hpe = as_numpy(table["hpe"])
+    vpe = as_numpy(table["vpe"])
+    vpe = np.abs(vpe, out=vpe) if vpe.flags.writeable else np.abs(vpe)  # in place when already a copy
+    hpl = as_numpy(table["hpl"])
+    vpl = as_numpy(table["vpl"])
+    time_us = as_numpy(table["time"])
     stations = _station_slices(table)
     ok = np.isfinite(hpe) & np.isfinite(vpe) & np.isfinite(hpl) & np.isfinite(vpl)
     pe = {"horizontal": hpe, "vertical": vpe}
@@ -494,7 +560,7 @@ def _station_slices(table: pl.DataFrame) -> dict[str, np.ndarray | slice]:
     names = uniq.cast(pl.String).to_list()
     if len(names) <= 1:
         return {name: slice(None) for name in names}
-    codes = st.to_physical().to_numpy()  # compare codes, not millions of strings
+    codes = as_numpy(st.to_physical())  # compare codes, not millions of strings
     return {name: np.flatnonzero(codes == code) for name, code in zip(names, uniq.to_physical(), strict=True)}
 
 
@@ -509,6 +575,9 @@ class _Counter:
 
     def __post_init__(self) -> None:
         self._cache: dict[tuple, ContinuityResult] = {}
+        # AL-independent masks of each axis, shared by all services
+        self._no_solution = {a: np.isnan(self.pe[a]) | np.isnan(self.pls[a]) for a in AXES}
+        self._above = {a: self.pe[a] > self.pls[a] for a in AXES}
 
     def continuity(self, key: tuple, avail: np.ndarray, window_s: float) -> ContinuityResult:
         if (key, window_s) not in self._cache:
@@ -529,9 +598,10 @@ class _Counter:
                 axes[axis] = AxisKPI(axis, None, None, 0, None, None)
                 continue
             masks[axis] = self.pls[axis] < al
-            frac, k = availability(self.pls[axis], al)
+            n, k = masks[axis].size, int(np.count_nonzero(masks[axis]))
             cont = self.continuity((axis, al), masks[axis], s.continuity_window_s)
-            axes[axis] = AxisKPI(axis, al, frac, k, cont, stanford_counts(self.pe[axis], self.pls[axis], al))
+            counts = _counts(self.pe[axis], self.pls[axis], al, self._no_solution[axis], self._above[axis])
+            axes[axis] = AxisKPI(axis, al, k / n if n else None, k, cont, counts)
         both = masks["horizontal"] & masks["vertical"] if "vertical" in masks else masks["horizontal"]
         n, k = len(both), int(np.count_nonzero(both))
         cont = self.continuity(("combined", s.hal, s.val), both, s.continuity_window_s)
