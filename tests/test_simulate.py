@@ -393,7 +393,7 @@ def test_multi_station_independent_and_named():
 def test_write_and_read_back(tmp_path):
     sim = simulate(SimulationConfig(days=0.1, seed=2, anomalies=("band:15:16:3",)))
     path = write_simulation(sim, tmp_path / "sim.parquet")
-    meta = json.loads(pl.read_parquet_metadata(path)["overbound"])
+    meta = json.loads(pl.read_parquet_metadata(path)["overbound"])["extra"]["simulation"]
     assert meta["config"]["anomalies"] == ["band:15:16:3:v"]
     assert meta["p_mi_v_true"] == pytest.approx(sim.p_mi_true("v"), rel=1e-15)
     assert meta["n_rows"] == sim.table.height

@@ -154,6 +154,7 @@ import numpy as np
 import polars as pl
 from scipy import signal, special, stats
 
+from overbound.io.table import read_epochs_metadata, write_epochs
 from overbound.services import SERVICES
 
 __all__ = [
@@ -185,7 +186,6 @@ _BATCH = 1024
 _NSV_MID, _NSV_SLOPE, _NSV_MIN, _NSV_MAX = 9.0, 8.0, 6, 12
 _AXES = {"v": "vertical", "vertical": "vertical", "h": "horizontal", "horizontal": "horizontal"}
 _TAIL_AXES = {**_AXES, "both": "both", "hv": "both", "vh": "both"}
-_META_KEY = "overbound"
 
 #: Truth columns appended to the epoch table, with unit and meaning.
 TRUTH_COLUMNS: dict[str, str] = {
@@ -1077,8 +1077,9 @@ def _simulate_station(
 def write_simulation(sim: Simulation, path: str | Path) -> Path:
     """Write the table: Parquet (``.parquet``/``.pq``) or CSV (``.csv``).
 
-    Parquet carries :meth:`Simulation.truth_dict` as JSON (sorted keys) in its
-    key-value metadata under the key ``overbound``; CSV gets it in a sidecar file
+    Written by :func:`overbound.io.table.write_epochs`; Parquet carries
+    :meth:`Simulation.truth_dict` in its provenance as ``extra.simulation``
+    (:func:`overbound.io.table.read_epochs_metadata`); CSV gets it in a sidecar file
     ``<path>.json``. The same simulation gives byte-identical files.
 
     Raises
@@ -1087,15 +1088,10 @@ def write_simulation(sim: Simulation, path: str | Path) -> Path:
         Unknown suffix.
     """
     path = Path(path)
-    meta = json.dumps(sim.truth_dict(), sort_keys=True, allow_nan=False)
-    suffix = path.suffix.lower()
-    if suffix in (".parquet", ".pq"):
-        sim.table.write_parquet(path, compression="zstd", statistics=True, metadata={_META_KEY: meta})
-    elif suffix == ".csv":
-        sim.table.write_csv(path)
-        Path(str(path) + ".json").write_text(meta + "\n")
-    else:
-        raise ValueError(f"{path}: unknown suffix {path.suffix!r}; expected .parquet, .pq or .csv")
+    truth = sim.truth_dict()
+    write_epochs(sim.table, path, extra_metadata={"simulation": truth})
+    if path.suffix.lower() == ".csv":  # CSV has no metadata block: the truth goes beside it
+        Path(str(path) + ".json").write_text(json.dumps(truth, sort_keys=True, allow_nan=False) + "\n")
     return path
 
 
@@ -1108,12 +1104,11 @@ def read_simulation(path: str | Path) -> Simulation:
         The file has no ``overbound`` metadata.
     """
     path = Path(path)
-    meta = pl.read_parquet_metadata(path).get(_META_KEY)
-    if meta is None:
+    d = read_epochs_metadata(path).get("extra", {}).get("simulation")
+    if d is None:
         raise ValueError(
-            f"{path}: no '{_META_KEY}' key in the Parquet metadata: not written by write_simulation"
+            f"{path}: no simulation truth in the Parquet metadata: not written by write_simulation"
         )
-    d = json.loads(meta)
     stations = tuple(
         StationTruth(
             name=s["name"],

@@ -225,3 +225,16 @@ def test_grid_with_jitter_and_gaps():
     res = continuity_risk(t, np.ones(t.size, bool), window_s=15)
     assert res.interval_s == pytest.approx(1.0, abs=0.03) and res.n_off_grid == 0
     assert res.n_gap_windows == 15  # windows starting at slots 85..99 reach into the gap 100-102
+
+
+def test_alerted_epochs_are_unavailable():
+    n = 6
+    table = _table([1.0] * n, [1.0] * n, [10.0] * n, [10.0] * n, range(n)).with_columns(
+        pl.Series("alert", [False, True, False, False, None, False])
+    )
+    res = count_kpis(table, [SERVICES["LPV"]])
+    k = res.services["LPV"]
+    assert k.combined.availability == pytest.approx(5 / 6)
+    assert k.vertical.stanford.unavailable == 1 and k.vertical.stanford.normal == 5
+    assert res.safety["vertical"].n == 5
+    assert table["hpl"][1] == 10.0  # the table itself is untouched

@@ -514,12 +514,21 @@ def count_kpis(
     -----
     A service without a vertical alert limit (NPA) has null vertical KPIs and its
     combined KPIs equal the horizontal ones.
+
+    An epoch whose optional ``alert`` column is true (the receiver flagged the solution
+    as not to be used) is unavailable for every service: its PLs count as infinite, so
+    it lands in the ``unavailable`` region, and it is left out of the safety index.
     """
     hpe = as_numpy(table["hpe"])
     vpe = as_numpy(table["vpe"])
     vpe = np.abs(vpe, out=vpe) if vpe.flags.writeable else np.abs(vpe)  # in place when already a copy
     hpl = as_numpy(table["hpl"])
     vpl = as_numpy(table["vpl"])
+    si_pls = {"horizontal": hpl, "vertical": vpl}
+    alert = _alerts(table)
+    if alert is not None:
+        si_pls = {a: np.where(alert, np.nan, x) for a, x in si_pls.items()}
+        hpl, vpl = (np.where(alert & ~np.isnan(x), np.inf, x) for x in (hpl, vpl))
     time_us = as_numpy(table["time"])
     stations = _station_slices(table)
     ok = np.isfinite(hpe) & np.isfinite(vpe) & np.isfinite(hpl) & np.isfinite(vpl)
@@ -543,10 +552,17 @@ def count_kpis(
         end=_iso(int(time_us.max())) if time_us.size else None,
         hpe95=_percentile95(hpe[ok]),
         vpe95=_percentile95(vpe[ok]),
-        safety={axis: safety_index(pe[axis], pls[axis], time_us) for axis in AXES},
+        safety={axis: safety_index(pe[axis], si_pls[axis], time_us) for axis in AXES},
         services=out_services,
         histograms=hist,
     )
+
+
+def _alerts(table: pl.DataFrame) -> np.ndarray | None:
+    """The ``alert`` flags when the table has any set, else ``None``."""
+    if "alert" not in table.columns or not table["alert"].any():
+        return None
+    return as_numpy(table["alert"].fill_null(False))
 
 
 def _percentile95(x: np.ndarray) -> float | None:
