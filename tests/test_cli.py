@@ -145,3 +145,33 @@ def test_simulate_and_demo(tmp_path):
     assert not math.isnan(sim_doc["services"]["LPV"]["continuity"]["combined"]["n_windows"])
     assert sim_doc["services"]["LPV"]["continuity"]["combined"]["n_windows"] > 10_000
     assert "index:" in res.output
+
+
+def test_column_mapping_from_the_command_line(tmp_path):
+    csv = tmp_path / "rx.csv"
+    csv.write_text(
+        "t,HPE_m,VPE_m,HPL_m,VPL_m\n"
+        "2024-01-07T00:00:00,1.0,-2.0,12.0,18.0\n"
+        "2024-01-07T00:00:01,1.5,2.5,12.5,55.0\n"
+    )
+    cols = [
+        "--column",
+        "time=t",
+        "--column",
+        "hpe=HPE_m",
+        "--column",
+        "vpe=VPE_m",
+        "--column",
+        "hpl=HPL_m",
+        "--column",
+        "vpl=VPL_m",
+    ]
+    out = tmp_path / "o"
+    res = CliRunner().invoke(main, ["analyze", str(csv), "-o", str(out), "--service", "LPV", *cols])
+    assert res.exit_code == 0, res.output
+    doc = json.loads((out / "summary.json").read_text())
+    assert doc["services"]["LPV"]["availability"] == {"horizontal": 1.0, "vertical": 0.5, "combined": 0.5}
+    bad = CliRunner().invoke(main, ["analyze", str(csv), "-o", str(out), "--column", "vpl"])
+    assert bad.exit_code == 2 and "expected NAME=COLUMN" in bad.output
+    missing = CliRunner().invoke(main, ["convert", str(csv), "-o", str(tmp_path / "e.parquet")])
+    assert missing.exit_code == 2 and "missing column(s)" in missing.output and "rx.csv" in missing.output

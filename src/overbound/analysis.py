@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import polars as pl
@@ -47,6 +47,7 @@ def load_epochs(
     reference: Reference | None = None,
     station: str | None = None,
     strict: bool = False,
+    mapping: Mapping[str, str] | None = None,
     columns: Sequence[str] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> tuple[pl.DataFrame, tuple[ReadReport, ...]]:
@@ -62,7 +63,15 @@ def load_epochs(
     for src in inputs:
         if progress:
             progress(source_name(src))
-        t, r = read(src, format=format, reference=reference, station=station, strict=strict, columns=columns)
+        t, r = read(
+            src,
+            format=format,
+            reference=reference,
+            station=station,
+            strict=strict,
+            mapping=mapping,
+            columns=columns,
+        )
         tables.append(t)
         reports.append(r)
     table = pl.concat(tables, how="diagonal_relaxed") if len(tables) > 1 else tables[0]
@@ -85,6 +94,7 @@ def analyze(
     reference: Reference | None = None,
     station: str | None = None,
     strict: bool = False,
+    mapping: Mapping[str, str] | None = None,
     title: str | None = None,
     columns: Sequence[str] | None = (),
     progress: Callable[[str], None] | None = None,
@@ -92,7 +102,8 @@ def analyze(
     """Read ``inputs`` (or take an epoch table) and count the KPIs for each service.
 
     ``services`` are names, ``NAME:HAL:VAL`` strings or :class:`ServiceLevel`;
-    all built-in levels when ``None``. ``columns`` are the optional epoch-table
+    all built-in levels when ``None``. ``mapping`` maps epoch-table names to the
+    columns of CSV/Parquet inputs (see :func:`overbound.io.read`). ``columns`` are the optional epoch-table
     columns to keep (default none: the counting needs only the required ones, and a
     year of 1 Hz ``east``/``north`` is half a gigabyte); ``None`` keeps all.
     """
@@ -106,6 +117,7 @@ def analyze(
             reference=reference,
             station=station,
             strict=strict,
+            mapping=mapping,
             columns=columns,
             progress=progress,
         )

@@ -71,7 +71,7 @@ def main() -> None:
     """GNSS integrity verification: availability, continuity, Stanford diagrams and MI statistics."""
 
 
-_reference_options = [
+_input_options = [
     click.option(
         "--reference",
         "reference",
@@ -81,13 +81,42 @@ _reference_options = [
     click.option(
         "--reference-ecef", "reference_ecef", metavar="X,Y,Z", help="True antenna position, ECEF (m)."
     ),
+    click.option(
+        "--format", "fmt", type=click.Choice(FORMATS), help="Force the input format (default: detect)."
+    ),
+    click.option("--station", help="Station name (default: from the input)."),
+    click.option("--strict", is_flag=True, help="Stop at the first malformed row instead of counting it."),
+    click.option(
+        "--column",
+        "column_map",
+        multiple=True,
+        metavar="NAME=COLUMN",
+        help="CSV/Parquet: epoch-table column NAME is COLUMN of the file (repeatable), e.g. vpl=VPL_m.",
+    ),
 ]
 
 
-def _with_reference(f):
-    for opt in reversed(_reference_options):
+def _with_input_options(f):
+    for opt in reversed(_input_options):
         f = opt(f)
     return f
+
+
+def _read_options(reference, reference_ecef, fmt, station, strict, column_map) -> dict:
+    """Keyword arguments of :func:`overbound.io.read` from the shared input options."""
+    mapping = {}
+    for item in column_map:
+        name, sep, col = item.partition("=")
+        if not sep or not name or not col:
+            raise click.BadParameter(f"{item!r}: expected NAME=COLUMN", param_hint="--column")
+        mapping[name.strip()] = col.strip()
+    return {
+        "reference": _reference(reference, reference_ecef),
+        "format": fmt,
+        "station": station,
+        "strict": strict,
+        "mapping": mapping or None,
+    }
 
 
 @main.command()
@@ -107,45 +136,24 @@ def _with_reference(f):
     metavar="NAME|NAME:HAL:VAL",
     help="Service level (repeatable); default: all of NPA, APV-I, APV-II, LPV, LPV-200, CAT-I.",
 )
-@_with_reference
-@click.option("--format", "fmt", type=click.Choice(FORMATS), help="Force the input format (default: detect).")
-@click.option("--station", help="Station name (default: from the input).")
-@click.option("--strict", is_flag=True, help="Stop at the first malformed row instead of counting it.")
+@_with_input_options
 @click.option(
     "--epochs",
     "epochs_out",
     type=click.Path(dir_okay=False, path_type=Path),
     help="Also write the pooled epoch table (.parquet or .csv).",
 )
-def analyze(inputs, out_dir, services, reference, reference_ecef, fmt, station, strict, epochs_out) -> None:
+def analyze(inputs, out_dir, services, epochs_out, **inputs_opts) -> None:
     """Analyse receiver output INPUTS: write OUTPUT/summary.json and OUTPUT/report.html."""
-    ref = _reference(reference, reference_ecef)
     paths = _run_analysis(
-        list(inputs),
-        out_dir,
-        services=services,
-        reference=ref,
-        fmt=fmt,
-        station=station,
-        strict=strict,
-        epochs_out=epochs_out,
+        list(inputs), out_dir, services=services, epochs_out=epochs_out, **_read_options(**inputs_opts)
     )
     click.echo(f"report: {paths[1]}")
     click.echo(f"summary: {paths[0]}")
 
 
-def _run_analysis(
-    inputs,
-    out_dir: Path,
-    *,
-    services=(),
-    reference=None,
-    fmt=None,
-    station=None,
-    strict=False,
-    epochs_out=None,
-    title=None,
-) -> tuple[Path, Path]:
+def _run_analysis(inputs, out_dir: Path, *, services=(), epochs_out=None, title=None, **read_opts):
+    """Analyse, write summary.json and report.html (and the epoch table); return their paths."""
     from overbound.analysis import analyze as run
     from overbound.io.table import write_epochs
     from overbound.report.html import write_report
@@ -160,11 +168,8 @@ def _run_analysis(
         result = run(
             inputs,
             services=list(services) or None,
-            format=fmt,
-            reference=reference,
-            station=station,
-            strict=strict,
             title=title,
+            **read_opts,
             columns=None if epochs_out else (),  # the epoch table written keeps every column
             progress=step,
         )
@@ -292,18 +297,13 @@ def simulate(
     type=click.Path(dir_okay=False, path_type=Path),
     help="Epoch table to write (.parquet or .csv).",
 )
-@_with_reference
-@click.option("--format", "fmt", type=click.Choice(FORMATS), help="Force the input format (default: detect).")
-@click.option("--station", help="Station name (default: from the input).")
-@click.option("--strict", is_flag=True, help="Stop at the first malformed row instead of counting it.")
-def convert(source, out, reference, reference_ecef, fmt, station, strict) -> None:
+@_with_input_options
+def convert(source, out, **inputs_opts) -> None:
     """Read SOURCE in any supported format and write it as an epoch table."""
     from overbound.io.open import read
     from overbound.io.table import write_epochs
 
-    table, report = read(
-        source, format=fmt, reference=_reference(reference, reference_ecef), station=station, strict=strict
-    )
+    table, report = read(source, **_read_options(**inputs_opts))
     write_epochs(table, out, report=report)
     click.echo(
         f"{out}: {report.rows_kept} epochs from {report.rows_read} rows ({report.format}); "
