@@ -627,15 +627,16 @@ _NOTES: tuple[tuple[str, str], ...] = (
     (
         "Availability",
         "The share of all epochs, with or without a solution, whose protection level is below the "
-        "alert limit: HPL < HAL, VPL < VAL; combined needs both. PL = AL is unavailable. A service "
-        "without a VAL (NPA) is horizontal only.",
+        "alert limit: HPL < HAL, VPL < VAL; combined needs both. PL = AL is unavailable, and so is an "
+        "epoch the receiver flagged with an alert. A service without a VAL (NPA) is horizontal only.",
     ),
     (
         "Continuity risk",
         "Counted over sliding windows as in Kannemans (2006), section 2.1.4: P = N_fail / (N_success "
         "+ N_fail). A window starts at every available epoch and covers the exposure time T after it "
         "(15 s for approaches, 3600 s for NPA); it fails when any epoch in (t, t + T] is unavailable "
-        "or missing. The epochs are placed on a regular grid with the median epoch spacing; a grid "
+        "or missing. The epochs are placed on a regular grid whose step is the mean epoch spacing "
+        "within 25 % of the median spacing (gaps left out, time-tag jitter averaged); a grid "
         "slot without an epoch (a data gap) counts as loss of service. Windows that would run past "
         "the end of the data are not counted, and windows never span two stations. When the sampling "
         "interval exceeds T no window can be counted and the risk is n.a., with the reason.",
@@ -675,7 +676,8 @@ _NOTES: tuple[tuple[str, str], ...] = (
 _REFERENCES: tuple[str, ...] = (
     "ICAO Annex 10, Volume I (7th ed., 2018), Table 3.7.2.4-1, Signal-in-space performance requirements.",
     "RTCA DO-229E (2016), Minimum Operational Performance Standards for GPS/SBAS airborne equipment, 2.2.4.",
-    "Kannemans, H. (2006), Integrity, availability and continuity of EGNOS, NLR-TP-2006-594, section 2.1.4.",
+    "Kannemans, H. (2006), An integrity, availability and continuity test method for EGNOS/WAAS, "
+    "NLR-TP-2006-594, section 2.1.4.",
     "Tossaint, M. et al. (2006), The Stanford-ESA integrity diagram: focusing on SBAS integrity, ION "
     "GNSS 2006.",
     "Hyndman, R. J., Fan, Y. (1996), Sample quantiles in statistical packages, The American "
