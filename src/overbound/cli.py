@@ -21,7 +21,8 @@ from overbound.io.schema import InputError
 
 __all__ = ["main"]
 
-console = Console(stderr=True)
+# Logs (no terminal) get a width that fits the KPI table on one line per service.
+console = Console(stderr=True, width=None if sys.stderr.isatty() else 120)
 #: Monument of UNAVCO station USLO (RINEX header comment), truth for the embedded demo data.
 USLO_REFERENCE = "35.311803,-120.661092,134.6419"
 DEMO_POS = "uslo-2006-361-waas.pos.gz"

@@ -143,11 +143,12 @@ def page(text):
 def test_every_section_with_its_heading(analysis, page):
     assert page.sections == list(section_ids(analysis))
     assert page.sections == [
-        "overview", "accuracy", "service-NPA", "service-LPV-200", "service-TEST",
+        "overview", "accuracy", "stations", "service-NPA", "service-LPV-200", "service-TEST",
         "time-series", "method-notes", "summary-data",
     ]  # fmt: skip
     assert [page.h2[s] for s in page.sections] == [
-        "Overview", "Accuracy", "NPA", "LPV-200", "TEST", "Time series", "Method notes", "Summary data",
+        "Overview", "Accuracy", "Stations", "NPA", "LPV-200", "TEST", "Time series", "Method notes",
+        "Summary data",
     ]  # fmt: skip
 
 
@@ -348,3 +349,41 @@ def test_degenerate_tables_still_give_every_section(table, n_epochs):
     assert page.sections == list(section_ids(a))
     assert page.facts["Epochs"] == n_epochs
     assert len(page.imgs) == 1 + 2 + 4
+
+
+def test_gh2_stations_section_for_several_stations(tmp_path):
+    """Several stations: per-station KPIs in the report and in summary.json."""
+    import datetime as dt
+
+    import numpy as np
+    import polars as pl
+
+    from overbound.analysis import analyze
+    from overbound.report.html import render_report, section_ids
+    from overbound.report.json import summary_dict
+
+    n = 600
+    t0 = dt.datetime(2024, 1, 7)
+    frames = []
+    for name, vpl in (("A", 10.0), ("B", 60.0)):
+        frames.append(
+            pl.DataFrame(
+                {
+                    "time": [t0 + dt.timedelta(seconds=i) for i in range(n)],
+                    "station": [name] * n,
+                    "hpe": np.ones(n),
+                    "vpe": np.ones(n),
+                    "hpl": np.full(n, 10.0),
+                    "vpl": np.full(n, vpl),
+                }
+            )
+        )
+    a = analyze(pl.concat(frames), services=["LPV"])
+    assert "stations" in section_ids(a)
+    page = render_report(a)
+    assert '<section id="stations">' in page
+    doc = summary_dict(a)
+    assert doc["stations"]["A"]["services"]["LPV"]["availability"]["combined"] == 1.0
+    assert doc["stations"]["B"]["services"]["LPV"]["availability"]["combined"] == 0.0
+    assert doc["services"]["LPV"]["availability"]["combined"] == 0.5
+    assert doc["stations"]["B"]["epochs"] == {"total": n, "with_solution": n}

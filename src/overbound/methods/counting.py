@@ -11,7 +11,7 @@ Columns needed: ``time``, ``station``, ``hpe``, ``vpe``, ``hpl``, ``vpl``.
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import polars as pl
@@ -196,6 +196,8 @@ class CountingResult:
     safety : :class:`SafetyIndex` per axis.
     services : :class:`ServiceKPI` per service name.
     histograms : :class:`StanfordHistogram` per ``(axis, plot maximum)``.
+    by_station : the same counts for each station alone when the table holds several
+        (without histograms); empty for a single station, where they equal the pooled ones.
     """
 
     n_total: int
@@ -208,6 +210,7 @@ class CountingResult:
     safety: dict[str, SafetyIndex]
     services: dict[str, ServiceKPI]
     histograms: dict[tuple[str, float], StanfordHistogram]
+    by_station: dict[str, CountingResult] = field(default_factory=dict)
 
     def histogram(self, axis: str, alert_limit: float) -> StanfordHistogram:
         """The histogram drawn for ``axis`` and a service with ``alert_limit``."""
@@ -497,6 +500,7 @@ def count_kpis(
     services: tuple[ServiceLevel, ...] | list[ServiceLevel],
     *,
     histogram_bins: int = 200,
+    by_station: bool = True,
 ) -> CountingResult:
     """All counting KPIs of ``table`` for each service.
 
@@ -505,7 +509,8 @@ def count_kpis(
     Returns
     -------
     CountingResult
-        Availability per service and axis (share of *all* epochs with PL < AL;
+        Pooled over all stations, and per station in ``by_station`` (unless
+        ``by_station=False``). Availability per service and axis (share of *all* epochs with PL < AL;
         combined = both axes), continuity risk per service window (per station,
         pooled), Stanford counts and histograms, accuracy (HPE95, |VPE|95 over
         epochs with a solution) and the safety index PE/PL.
@@ -540,7 +545,7 @@ def count_kpis(
     for s in services:
         for axis in AXES:
             al = s.alert_limit(axis)
-            if al is not None and (axis, plot_max(al)) not in hist:
+            if histogram_bins and al is not None and (axis, plot_max(al)) not in hist:
                 hist[(axis, plot_max(al))] = stanford_histogram(
                     pe[axis], pls[axis], axis=axis, max_value=plot_max(al), bins=histogram_bins
                 )
@@ -555,7 +560,17 @@ def count_kpis(
         safety={axis: safety_index(pe[axis], si_pls[axis], time_us) for axis in AXES},
         services=out_services,
         histograms=hist,
+        by_station=_by_station(table, services) if by_station and len(stations) > 1 else {},
     )
+
+
+def _by_station(table: pl.DataFrame, services: tuple[ServiceLevel, ...] | list[ServiceLevel]) -> dict:
+    st = pl.col("station").cast(pl.String)
+    names = table["station"].cast(pl.String).unique(maintain_order=True).to_list()
+    return {
+        name: count_kpis(table.filter(st == name), services, histogram_bins=0, by_station=False)
+        for name in names
+    }
 
 
 def _alerts(table: pl.DataFrame) -> np.ndarray | None:

@@ -42,6 +42,7 @@ __all__ = [
     "close_figure",
     "envelope",
     "figure_png",
+    "format_percent",
     "new_figure",
     "plot_safety_index",
     "plot_stanford",
@@ -136,7 +137,7 @@ def figure_png(fig: Figure, *, dpi: float = 120) -> bytes:
     return buf.getvalue()
 
 
-def _percent(n: int, total: int) -> str:
+def format_percent(n: int, total: int) -> str:
     """``n/total`` in percent with just enough decimals not to round a nonzero share to 0 or 100."""
     if total <= 0:
         return "n.a."
@@ -284,7 +285,7 @@ def plot_stanford(
             ax.text(
                 x,
                 y,
-                f"{label}\n{n:,} ({_percent(n, total)})",
+                f"{label}\n{n:,} ({format_percent(n, total)})",
                 ha="center",
                 va="center",
                 fontsize=7,

@@ -7,8 +7,8 @@ bytes on every run: there is no timestamp, and the PNGs carry no software or dat
 metadata.
 
 Sections (each a ``<section id=...>`` with an ``<h2>``): ``overview``, ``accuracy``,
-one ``service-<name>`` per service level, ``time-series``, ``method-notes`` and
-``summary-data`` (the ``summary.json`` document, folded).
+``stations`` (only for several stations), one ``service-<name>`` per service level,
+``time-series``, ``method-notes`` and ``summary-data`` (the ``summary.json`` document, folded).
 """
 
 from __future__ import annotations
@@ -35,9 +35,9 @@ from overbound.methods.counting import (
 from overbound.report.figures import (
     REGION_COLOURS,
     REGION_LABELS,
-    _percent,
     close_figure,
     figure_png,
+    format_percent,
     plot_safety_index,
     plot_stanford,
     plot_timeseries,
@@ -83,6 +83,7 @@ def section_ids(analysis: Analysis) -> tuple[str, ...]:
     return (
         "overview",
         "accuracy",
+        *(("stations",) if analysis.counting.by_station else ()),
         *(_service_id(s) for s in analysis.services),
         "time-series",
         "method-notes",
@@ -98,6 +99,7 @@ def render_report(analysis: Analysis, *, summary: dict | None = None) -> str:
         _header(analysis),
         _overview(analysis),
         _accuracy(c),
+        *((_stations(analysis),) if c.by_station else ()),
         *(_service(analysis, s) for s in analysis.services),
         _time_series(analysis),
         _method_notes(c),
@@ -272,8 +274,8 @@ def _overview(a: Analysis) -> str:
         ),
         (f"Station{'s' if len(c.stations) != 1 else ''}", _e(", ".join(c.stations) or "none")),
         ("Epochs", f"{c.n_total:,}"),
-        ("with a solution", f"{c.n_with_solution:,} ({_percent(c.n_with_solution, c.n_total)})"),
-        ("without a solution", f"{no_sol:,} ({_percent(no_sol, c.n_total)})"),
+        ("with a solution", f"{c.n_with_solution:,} ({format_percent(c.n_with_solution, c.n_total)})"),
+        ("without a solution", f"{no_sol:,} ({format_percent(no_sol, c.n_total)})"),
         ("Rows rejected while reading", f"{a.n_rejected:,}"),
         ("Service levels", _e(", ".join(s.name for s in a.services))),
     ]
@@ -373,6 +375,54 @@ def _accuracy(c: CountingResult) -> str:
     )
 
 
+def _stations(a: Analysis) -> str:
+    """Per-station KPIs: a campaign's weak stations are where its pooled figures come from."""
+    rows = []
+    for name, c in a.counting.by_station.items():
+        for s in a.services:
+            k = c.services[s.name]
+            v = k.vertical.stanford
+            h = k.horizontal.stanford
+            cont = k.combined.continuity
+            rows.append(
+                [
+                    _e(name),
+                    _num(_h_int(c.n_total)),
+                    _num(_h_m(c.hpe95)),
+                    _num(_h_m(c.vpe95)),
+                    _e(s.name),
+                    *(_num(_h_pct(x, c.n_total)) for x in (k.horizontal, k.vertical, k.combined)),
+                    _num(_h_sci(cont.risk if cont else None)),
+                    _num(f"{h.mi} / {'–' if v is None else v.mi}"),
+                    _num(f"{h.hmi} / {'–' if v is None else v.hmi}"),
+                ]
+            )
+    head = [
+        "Station",
+        _num("Epochs"),
+        _num("HPE95"),
+        _num("|VPE|95"),
+        "Service",
+        _num("Avail. H"),
+        _num("Avail. V"),
+        _num("Avail. H+V"),
+        _num("Cont. risk H+V"),
+        _num("MI H / V"),
+        _num("HMI H / V"),
+    ]
+    return _section(
+        "stations",
+        "Stations",
+        f"<p>The same counts for each of the {len(a.counting.by_station)} stations alone; the sections below "
+        "pool them (continuity windows never span two stations).</p>\n"
+        + _table(head, rows, caption="Availability in % of each station's epochs."),
+    )
+
+
+def _h_pct(k: AxisKPI, n_total: int) -> str:
+    return "n.a." if k.availability is None else format_percent(k.n_available, n_total)
+
+
 def _value(v: Verdict) -> str:
     if v.value is None:
         return "n.a."
@@ -454,7 +504,7 @@ def _kpi_rows(a: Analysis, s: ServiceLevel, k: ServiceKPI) -> list[list[str]]:
             [
                 "Availability",
                 _e(x.axis),
-                _num(_percent(x.n_available, n_total)),
+                _num(format_percent(x.n_available, n_total)),
                 _availability_counts(x, n_total),
                 _num("—"),
                 "—",
@@ -464,7 +514,7 @@ def _kpi_rows(a: Analysis, s: ServiceLevel, k: ServiceKPI) -> list[list[str]]:
         "availability (combined)",
         "combined",
         _availability_counts(k.combined, n_total),
-        _percent(k.combined.n_available, n_total),
+        format_percent(k.combined.n_available, n_total),
     )
     for x in axes:
         risk = x.continuity.risk if x.continuity else None
@@ -507,7 +557,7 @@ def _stanford_table(a: Analysis, s: ServiceLevel, k: ServiceKPI) -> str:
         for r in regions:
             n = getattr(x.stanford, r.key)
             cls = ' class="alarm"' if r in (Region.HMI, Region.UNAVAILABLE_MI, Region.MI) and n else ""
-            cells.append(_num(f"<span{cls}>{n:,}</span><br><small>{_percent(n, total)}</small>"))
+            cells.append(_num(f"<span{cls}>{n:,}</span><br><small>{format_percent(n, total)}</small>"))
         hist = a.counting.histogram(axis, x.alert_limit)
         rows.append(
             [

@@ -3,7 +3,8 @@
 Keys are sorted and floats are written with 12 significant digits, so that the same
 inputs give the same bytes on every run. NaN and infinities become ``null``.
 Schema ``overbound.summary/1``; keys listed in the foundation issue are stable,
-others may be added.
+others may be added. ``stations`` holds the same KPIs per station when the input has
+several stations (empty otherwise).
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import numpy as np
 
 from overbound import __version__
 from overbound.analysis import Analysis, verdicts
-from overbound.methods.counting import AXES, AxisKPI, ContinuityResult
+from overbound.methods.counting import AXES, AxisKPI, ContinuityResult, CountingResult, ServiceKPI
 
 __all__ = ["SCHEMA", "dumps", "summary_dict", "to_jsonable", "write_summary"]
 
@@ -71,6 +72,26 @@ def _axes(kpi: dict[str, AxisKPI], field: str) -> dict:
     return {name: getattr(a, field) for name, a in kpi.items()}
 
 
+def _service_kpis(k: ServiceKPI) -> dict:
+    """Availability, continuity risk and Stanford counts of one service (pooled or per station)."""
+    axes = {"horizontal": k.horizontal, "vertical": k.vertical, "combined": k.combined}
+    return {
+        "availability": _axes(axes, "availability"),
+        "continuity_risk": {n: (a.continuity.risk if a.continuity else None) for n, a in axes.items()},
+        "stanford": {a: (axes[a].stanford.to_dict() if axes[a].stanford else None) for a in AXES},
+    }
+
+
+def _station_dict(c: CountingResult, services) -> dict:
+    """The per-station part of the summary: counts, accuracy and each service's KPIs."""
+    return {
+        "epochs": {"total": c.n_total, "with_solution": c.n_with_solution},
+        "time": {"start": c.start, "end": c.end},
+        "accuracy": {"hpe95": c.hpe95, "vpe95": c.vpe95},
+        "services": {s.name: _service_kpis(c.services[s.name]) for s in services},
+    }
+
+
 def summary_dict(analysis: Analysis) -> dict:
     """The ``summary.json`` document of an :class:`~overbound.analysis.Analysis`."""
     c = analysis.counting
@@ -81,11 +102,9 @@ def summary_dict(analysis: Analysis) -> dict:
         services[s.name] = {
             "hal": s.hal,
             "val": s.val,
-            "availability": _axes(axes, "availability"),
+            **_service_kpis(k),
             "n_available": _axes(axes, "n_available"),
-            "continuity_risk": {n: (a.continuity.risk if a.continuity else None) for n, a in axes.items()},
             "continuity": {n: _continuity(a.continuity) for n, a in axes.items()},
-            "stanford": {a: (axes[a].stanford.to_dict() if axes[a].stanford else None) for a in AXES},
             "requirements": {
                 "integrity_risk": s.integrity_risk,
                 "integrity_exposure_s": s.integrity_exposure_s,
@@ -118,6 +137,7 @@ def summary_dict(analysis: Analysis) -> dict:
         "accuracy": {"hpe95": c.hpe95, "vpe95": c.vpe95},
         "safety_index": {a: dataclasses.asdict(c.safety[a]) for a in AXES},
         "services": services,
+        "stations": {name: _station_dict(sc, analysis.services) for name, sc in c.by_station.items()},
     }
 
 
