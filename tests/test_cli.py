@@ -175,3 +175,18 @@ def test_column_mapping_from_the_command_line(tmp_path):
     assert bad.exit_code == 2 and "expected NAME=COLUMN" in bad.output
     missing = CliRunner().invoke(main, ["convert", str(csv), "-o", str(tmp_path / "e.parquet")])
     assert missing.exit_code == 2 and "missing column(s)" in missing.output and "rx.csv" in missing.output
+
+
+def test_time_window_from_the_command_line(tmp_path):
+    out = tmp_path / "o"
+    res = CliRunner().invoke(
+        main,
+        ["analyze", str(POS), "--reference", USLO_REFERENCE, "-o", str(out), "--service", "LPV",
+         "--start", "2006-12-27T06:00:00", "--end", "2006-12-27T12:00:00"],
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    doc = json.loads((out / "summary.json").read_text())
+    times = [ln.split()[1] for ln in gzip.open(POS, "rt") if not ln.startswith("%")]
+    assert doc["epochs"]["total"] == sum("06:00:00" <= t < "12:00:00" for t in times) == 719  # one gap
+    assert doc["time"]["start"] == "2006-12-27T06:00:00.000"
+    assert doc["time"]["end"] == "2006-12-27T11:59:30.000"

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import datetime as dt
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
@@ -49,6 +50,7 @@ def load_epochs(
     strict: bool = False,
     mapping: Mapping[str, str] | None = None,
     columns: Sequence[str] | None = None,
+    time_range: tuple[dt.datetime | None, dt.datetime | None] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> tuple[pl.DataFrame, tuple[ReadReport, ...]]:
     """Read and pool several inputs into one epoch table.
@@ -71,6 +73,7 @@ def load_epochs(
             strict=strict,
             mapping=mapping,
             columns=columns,
+            time_range=time_range,
         )
         tables.append(t)
         reports.append(r)
@@ -97,6 +100,7 @@ def analyze(
     mapping: Mapping[str, str] | None = None,
     title: str | None = None,
     columns: Sequence[str] | None = (),
+    time_range: tuple[dt.datetime | None, dt.datetime | None] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> Analysis:
     """Read ``inputs`` (or take an epoch table) and count the KPIs for each service.
@@ -106,6 +110,7 @@ def analyze(
     columns of CSV/Parquet inputs (see :func:`overbound.io.read`). ``columns`` are the optional epoch-table
     columns to keep (default none: the counting needs only the required ones, and a
     year of 1 Hz ``east``/``north`` is half a gigabyte); ``None`` keeps all.
+    ``time_range`` keeps the epochs with ``start <= time < stop`` (GPS time).
     """
     if isinstance(inputs, pl.DataFrame):
         table, reports = validate_epochs(inputs), ()
@@ -119,6 +124,7 @@ def analyze(
             strict=strict,
             mapping=mapping,
             columns=columns,
+            time_range=time_range,
             progress=progress,
         )
         label = title or ", ".join(source_name(s) for s in inputs)

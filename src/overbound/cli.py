@@ -72,6 +72,7 @@ def main() -> None:
     """GNSS integrity verification: availability, continuity, Stanford diagrams and MI statistics."""
 
 
+_TIME_FORMATS = ["%Y-%m-%dT%H:%M:%S", "%Y-%m-%d %H:%M:%S", "%Y-%m-%dT%H:%M", "%Y-%m-%d"]
 _input_options = [
     click.option(
         "--reference",
@@ -88,6 +89,12 @@ _input_options = [
     click.option("--station", help="Station name (default: from the input)."),
     click.option("--strict", is_flag=True, help="Stop at the first malformed row instead of counting it."),
     click.option(
+        "--start", type=click.DateTime(_TIME_FORMATS), help="Keep epochs from this GPS time on (ISO 8601)."
+    ),
+    click.option(
+        "--end", type=click.DateTime(_TIME_FORMATS), help="Keep epochs before this GPS time (ISO 8601)."
+    ),
+    click.option(
         "--column",
         "column_map",
         multiple=True,
@@ -103,7 +110,7 @@ def _with_input_options(f):
     return f
 
 
-def _read_options(reference, reference_ecef, fmt, station, strict, column_map) -> dict:
+def _read_options(reference, reference_ecef, fmt, station, strict, start, end, column_map) -> dict:
     """Keyword arguments of :func:`overbound.io.read` from the shared input options."""
     mapping = {}
     for item in column_map:
@@ -117,6 +124,7 @@ def _read_options(reference, reference_ecef, fmt, station, strict, column_map) -
         "station": station,
         "strict": strict,
         "mapping": mapping or None,
+        "time_range": (start, end) if start or end else None,
     }
 
 
