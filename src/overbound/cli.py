@@ -89,10 +89,13 @@ _input_options = [
     click.option("--station", help="Station name (default: from the input)."),
     click.option("--strict", is_flag=True, help="Stop at the first malformed row instead of counting it."),
     click.option(
-        "--start", type=click.DateTime(_TIME_FORMATS), help="Keep epochs from this GPS time on (ISO 8601)."
+        "--start",
+        type=click.DateTime(_TIME_FORMATS),
+        metavar="GPST",
+        help="Keep epochs from this GPS time on (ISO 8601, e.g. 2024-01-07T06:00:00).",
     ),
     click.option(
-        "--end", type=click.DateTime(_TIME_FORMATS), help="Keep epochs before this GPS time (ISO 8601)."
+        "--end", type=click.DateTime(_TIME_FORMATS), metavar="GPST", help="Keep epochs before this GPS time."
     ),
     click.option(
         "--column",
