@@ -13,13 +13,15 @@ from overbound.io.schema import InputError
 
 DATA = Path(__file__).resolve().parents[1] / "data"
 GLAB = sorted(
-    p for p in (DATA / "glab").rglob("*") if p.is_file() and p.name not in ("PROVENANCE.md", "empty.glab")
+    p
+    for p in (DATA / "glab").rglob("*")
+    if p.is_file() and p.name not in ("PROVENANCE.md", "empty.glab") and not p.name.endswith(".summary.txt")
 )
 UBX = sorted((DATA / "ubx").glob("*.ubx"))
 
 
 def test_fixture_lists_are_not_empty():
-    assert len(GLAB) == 11 and len(UBX) == 9
+    assert len(GLAB) == 12 and len(UBX) == 9
 
 
 @pytest.mark.parametrize("path", GLAB, ids=lambda p: p.name)
