@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import polars as pl
 import pytest
+import wgs84
 from polars.testing import assert_frame_equal
 
 from overbound.io.geodesy import Reference
@@ -25,32 +26,10 @@ USLO = Path(str(files("overbound") / "data" / "uslo-2006-361-waas.pos.gz"))
 # Monument from the RINEX header comment (src/overbound/data/PROVENANCE.md).
 TRUTH = Reference(35.311803, -120.661092, 134.6419)
 
-# --------------------------------------------------------------------------- independent geodesy
-# Closed-form WGS-84 (NIMA TR8350.2) geodetic -> ECEF and the ECEF -> local ENU rotation,
-# written here so the reader's numbers (pymap3d) are checked against another implementation.
-_A, _F = 6378137.0, 1 / 298.257223563
-_E2 = _F * (2 - _F)
-
-
-def _ecef(lat: float, lon: float, h: float) -> tuple[float, float, float]:
-    p, lam = math.radians(lat), math.radians(lon)
-    n = _A / math.sqrt(1 - _E2 * math.sin(p) ** 2)
-    return (
-        (n + h) * math.cos(p) * math.cos(lam),
-        (n + h) * math.cos(p) * math.sin(lam),
-        (n * (1 - _E2) + h) * math.sin(p),
-    )
-
 
 def _enu(lat: float, lon: float, h: float, ref: Reference = TRUTH) -> tuple[float, float, float]:
-    x, y, z = _ecef(lat, lon, h)
-    x0, y0, z0 = _ecef(ref.lat_deg, ref.lon_deg, ref.height_m)
-    dx, dy, dz = x - x0, y - y0, z - z0
-    p, lam = math.radians(ref.lat_deg), math.radians(ref.lon_deg)
-    e = -math.sin(lam) * dx + math.cos(lam) * dy
-    n = -math.sin(p) * math.cos(lam) * dx - math.sin(p) * math.sin(lam) * dy + math.cos(p) * dz
-    u = math.cos(p) * math.cos(lam) * dx + math.cos(p) * math.sin(lam) * dy + math.sin(p) * dz
-    return e, n, u
+    """Closed-form ENU (tests/reference/wgs84.py), independent of the reader's pymap3d."""
+    return wgs84.enu(lat, lon, h, ref.lat_deg, ref.lon_deg, ref.height_m)
 
 
 def _plain_rows(path: Path) -> list[list[str]]:

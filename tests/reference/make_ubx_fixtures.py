@@ -26,6 +26,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 import pymap3d
+import wgs84  # tests/reference/wgs84.py, beside this script
 from pyubx2 import GET, UBXMessage
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -37,7 +38,6 @@ REF_LAT, REF_LON, REF_H = 43.5607, 1.4809, 207.0
 WEEK, TOW0_MS = 2036, 86_400_000  # 2019-01-14 00:00:00 GPST
 LEAP = 18  # GPS-UTC in January 2019
 GPS_EPOCH = dt.datetime(1980, 1, 6)
-WGS84_A, WGS84_F = 6378137.0, 1 / 298.257223563
 
 
 @dataclass(frozen=True)
@@ -82,27 +82,9 @@ def geodetic(ep: Epoch) -> tuple[float, float, float]:
     return float(lat), float(lon), float(h)
 
 
-def _ecef(lat: float, lon: float, h: float) -> tuple[float, float, float]:
-    e2 = WGS84_F * (2 - WGS84_F)
-    phi, lam = math.radians(lat), math.radians(lon)
-    n = WGS84_A / math.sqrt(1 - e2 * math.sin(phi) ** 2)
-    return (
-        (n + h) * math.cos(phi) * math.cos(lam),
-        (n + h) * math.cos(phi) * math.sin(lam),
-        (n * (1 - e2) + h) * math.sin(phi),
-    )
-
-
 def enu(lat: float, lon: float, h: float) -> tuple[float, float, float]:
-    """Closed-form ENU of a geodetic point relative to the reference."""
-    x, y, z = _ecef(lat, lon, h)
-    x0, y0, z0 = _ecef(REF_LAT, REF_LON, REF_H)
-    dx, dy, dz = x - x0, y - y0, z - z0
-    phi, lam = math.radians(REF_LAT), math.radians(REF_LON)
-    e = -math.sin(lam) * dx + math.cos(lam) * dy
-    n = -math.sin(phi) * math.cos(lam) * dx - math.sin(phi) * math.sin(lam) * dy + math.cos(phi) * dz
-    u = math.cos(phi) * math.cos(lam) * dx + math.cos(phi) * math.sin(lam) * dy + math.sin(phi) * dz
-    return e, n, u
+    """Closed-form ENU of a geodetic point relative to the reference (:mod:`wgs84`)."""
+    return wgs84.enu(lat, lon, h, REF_LAT, REF_LON, REF_H)
 
 
 def _scaled(n: int, res: float) -> float:

@@ -6,7 +6,7 @@ Run from the repository root with the shared data present::
 
 Every file starts from the first lines of the real RTKLIB-MOPS outputs and changes only
 what its name says. The ECEF and d-m-s variants are converted with a closed-form WGS-84
-formula written here (not pymap3d), printed as RTKLIB's ``outecef``/``outpos`` do.
+formula (``tests/reference/wgs84.py``, not pymap3d), printed as RTKLIB's ``outecef``/``outpos`` do.
 """
 
 from __future__ import annotations
@@ -17,19 +17,10 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).parent
-A, F = 6378137.0, 1 / 298.257223563  # WGS-84 (NIMA TR8350.2)
-E2 = F * (2 - F)
+sys.path.insert(0, str(HERE.parents[1] / "reference"))
+import wgs84  # noqa: E402  (tests/reference, not a package)
+
 N_DATA = 8  # data lines kept from the real file
-
-
-def ecef(lat: float, lon: float, h: float) -> tuple[float, float, float]:
-    p, l_ = math.radians(lat), math.radians(lon)
-    n = A / math.sqrt(1 - E2 * math.sin(p) ** 2)
-    return (
-        (n + h) * math.cos(p) * math.cos(l_),
-        (n + h) * math.cos(p) * math.sin(l_),
-        (n * (1 - E2) + h) * math.sin(p),
-    )
 
 
 def dms(deg: float) -> str:
@@ -94,7 +85,7 @@ def main(src: Path) -> None:
     xyz = []
     for ln in data:
         f = ln.split()
-        x, y, z = ecef(float(f[2]), float(f[3]), float(f[4]))
+        x, y, z = wgs84.ecef(float(f[2]), float(f[3]), float(f[4]))
         xyz.append(f"{f[0]} {f[1]} {x:14.4f} {y:14.4f} {z:14.4f} " + " ".join(f[5:]))
     put(
         "xyz.pos",
