@@ -30,9 +30,9 @@ __all__ = [
     "ServiceKPI",
     "StanfordCounts",
     "StanfordHistogram",
-    "availability",
     "continuity_risk",
     "count_kpis",
+    "plot_max",
     "safety_index",
     "stanford_counts",
     "stanford_histogram",
@@ -271,13 +271,6 @@ def _counts(
         unavailable_mi=n_unavail_mi,
         no_solution=n_nosol,
     )
-
-
-def availability(pl_: np.ndarray, alert_limit: float) -> tuple[float | None, int]:
-    """Share of all epochs with ``PL < AL`` and the count; NaN PL (no solution) is unavailable."""
-    n = len(pl_)
-    k = int(np.count_nonzero(np.asarray(pl_) < alert_limit))
-    return (k / n if n else None), k
 
 
 def plot_max(alert_limit: float) -> float:
