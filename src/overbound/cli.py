@@ -325,6 +325,104 @@ def convert(source, out, **inputs_opts) -> None:
 
 
 @main.command()
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "-o",
+    "--output",
+    "out_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Output directory for confidence.json and confidence.html.",
+)
+@click.option(
+    "--axis",
+    type=click.Choice(["vertical", "horizontal"]),
+    default="vertical",
+    show_default=True,
+    help="PL to assess; horizontal needs signed east/north errors.",
+)
+@click.option("--min-samples", default=200, show_default=True, type=click.IntRange(min=2))
+@click.option(
+    "--spacing",
+    default=360.0,
+    show_default=True,
+    type=click.FloatRange(min=0),
+    help="Seconds between independent samples.",
+)
+@click.option(
+    "--tolerance",
+    default=0.125,
+    show_default=True,
+    type=click.FloatRange(min=0, min_open=True),
+    help="Band half-width (m).",
+)
+@click.option(
+    "--max-tolerance",
+    default=1.0,
+    show_default=True,
+    type=click.FloatRange(min=0, min_open=True),
+    help="Widest band half-width when a band is widened to reach --min-samples (m).",
+)
+@click.option(
+    "--step",
+    default=0.25,
+    show_default=True,
+    type=click.FloatRange(min=0, min_open=True),
+    help="Target step (m).",
+)
+@click.option(
+    "--max-pl",
+    default=50.0,
+    show_default=True,
+    type=click.FloatRange(min=0, min_open=True),
+    help="Last target (m).",
+)
+@click.option(
+    "--risk",
+    default=1e-7,
+    show_default=True,
+    type=click.FloatRange(0, 1, min_open=True, max_open=True),
+    help="Integrity risk per independent sample.",
+)
+@_with_input_options
+def confidence(
+    inputs, out_dir, axis, min_samples, spacing, tolerance, max_tolerance, step, max_pl, risk, **inputs_opts
+) -> None:
+    """PL confidence level per PL band (Comby et al. 2003): OUTPUT/confidence.json and confidence.html."""
+    from overbound.analysis import load_epochs
+    from overbound.report.confidence import run_confidence
+
+    with _progress() as bar:
+        bar.add_task(f"{axis} PL confidence level", total=None)
+        table, _ = load_epochs(
+            list(inputs), columns=("east", "north", "alert"), **_read_options(**inputs_opts)
+        )
+        run = run_confidence(
+            table,
+            out_dir,
+            axes=(axis,),
+            min_samples=min_samples,
+            spacing=spacing,
+            tolerance=tolerance,
+            max_tolerance=max_tolerance,
+            step=step,
+            max_pl=max_pl,
+            risk=risk,
+        )
+    (a,), (path,) = run.analyses, run.json_paths
+    with_cl = [b for b in a.bins if b.sufficient]
+    suspect = ", ".join(f"{a.bins[i].target:.2f}" for i in a.suspect) or "none"
+    console.print(
+        f"{a.axis}: {len(a.bins)} bands, {len(with_cl)} with {a.min_samples} samples; "
+        f"confidence below 1 % at PL {suspect}",
+        highlight=False,
+        soft_wrap=True,
+    )
+    click.echo(f"confidence: {path}")
+    click.echo(f"report: {run.report}")
+
+
+@main.command()
 @click.option(
     "-o",
     "--output",

@@ -23,6 +23,7 @@ import numpy as np
 
 from overbound import __version__
 from overbound.analysis import Analysis, Verdict, verdicts
+from overbound.methods.confidence_level import ConfidenceAnalysis
 from overbound.methods.counting import (
     AXES,
     SAFETY_PERCENTILES,
@@ -32,6 +33,7 @@ from overbound.methods.counting import (
     Region,
     ServiceKPI,
 )
+from overbound.report.confidence import confidence_section_html
 from overbound.report.figures import (
     REGION_COLOURS,
     REGION_LABELS,
@@ -55,7 +57,13 @@ _PE = {"horizontal": "HPE", "vertical": "|VPE|"}
 _PL = {"horizontal": "HPL", "vertical": "VPL"}
 
 
-def write_report(analysis: Analysis, directory: str | Path, *, summary: dict | None = None) -> Path:
+def write_report(
+    analysis: Analysis,
+    directory: str | Path,
+    *,
+    summary: dict | None = None,
+    confidence: tuple[ConfidenceAnalysis, ...] = (),
+) -> Path:
     """Write ``report.html`` into ``directory`` (created if needed); return its path.
 
     Parameters
@@ -74,33 +82,37 @@ def write_report(analysis: Analysis, directory: str | Path, *, summary: dict | N
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / REPORT_NAME
-    path.write_bytes(render_report(analysis, summary=summary).encode("utf-8"))
+    path.write_bytes(render_report(analysis, summary=summary, confidence=confidence).encode("utf-8"))
     return path
 
 
-def section_ids(analysis: Analysis) -> tuple[str, ...]:
+def section_ids(analysis: Analysis, confidence: tuple[ConfidenceAnalysis, ...] = ()) -> tuple[str, ...]:
     """The ``id`` of every ``<section>`` of the report of ``analysis``, in page order."""
     return (
         "overview",
         "accuracy",
         *(("stations",) if analysis.counting.by_station else ()),
         *(_service_id(s) for s in analysis.services),
+        *(f"confidence-{c.axis}" for c in confidence),
         "time-series",
         "method-notes",
         "summary-data",
     )
 
 
-def render_report(analysis: Analysis, *, summary: dict | None = None) -> str:
+def render_report(
+    analysis: Analysis, *, summary: dict | None = None, confidence: tuple[ConfidenceAnalysis, ...] = ()
+) -> str:
     """The text of ``report.html`` (see :func:`write_report`)."""
     doc = summary if summary is not None else summary_dict(analysis)
     c = analysis.counting
     body = [
-        _header(analysis),
+        _header(analysis, confidence),
         _overview(analysis),
         _accuracy(c),
         *((_stations(analysis),) if c.by_station else ()),
         *(_service(analysis, s) for s in analysis.services),
+        *(confidence_section_html(c) for c in confidence),
         _time_series(analysis),
         _method_notes(c),
         _section(
@@ -233,13 +245,14 @@ def _render(ax, name: str, alt: str, caption: str) -> _Figure:
 # sections
 
 
-def _header(a: Analysis) -> str:
+def _header(a: Analysis, confidence: tuple[ConfidenceAnalysis, ...] = ()) -> str:
     links = "".join(
         f'<li><a href="#{_e(sid)}">{_e(label)}</a></li>'
         for sid, label in [
             ("overview", "Overview"),
             ("accuracy", "Accuracy"),
             *((_service_id(s), s.name) for s in a.services),
+            *((f"confidence-{c.axis}", f"{c.axis.capitalize()} PL confidence") for c in confidence),
             ("time-series", "Time series"),
             ("method-notes", "Method notes"),
             ("summary-data", "Summary data"),
@@ -778,6 +791,7 @@ tbody tr:nth-child(even){background:#fafbfc}
 .num{text-align:right;white-space:nowrap}
 td small{color:var(--muted)}
 .alarm{color:var(--fail);font-weight:700}
+tr.suspect{background:var(--fail-bg)}
 .badge{display:inline-block;min-width:3.6em;text-align:center;padding:1px 8px;border-radius:10px;
 font-weight:700;font-size:.78rem;letter-spacing:.04em;border:1px solid}
 .badge.pass{color:var(--pass);background:var(--pass-bg);border-color:var(--pass)}
