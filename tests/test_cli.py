@@ -190,3 +190,29 @@ def test_time_window_from_the_command_line(tmp_path):
     assert doc["epochs"]["total"] == sum("06:00:00" <= t < "12:00:00" for t in times) == 719  # one gap
     assert doc["time"]["start"] == "2006-12-27T06:00:00.000"
     assert doc["time"]["end"] == "2006-12-27T11:59:30.000"
+
+
+def test_gh3_confidence_command_and_report_section(tmp_path):
+    """`overbound confidence` writes confidence.json; `analyze` adds its section and summary brief."""
+    sim = tmp_path / "c.parquet"
+    args = ["simulate", "-o", str(sim), "--days", "6", "--seed", "3", "--tail-fraction", "0",
+            "--anomaly", "band:15:16:3"]  # fmt: skip
+    assert CliRunner().invoke(main, args).exit_code == 0
+    res = CliRunner().invoke(main, ["confidence", str(sim), "-o", str(tmp_path / "cl")])
+    assert res.exit_code == 0, res.output
+    doc = json.loads((tmp_path / "cl" / "confidence.json").read_text())
+    assert doc["schema"] == "overbound.confidence/1" and doc["axis"] == "vertical" and doc["risk"] == 1e-7
+    suspect = [b["target"] for b in doc["bins"] if b["confidence"] is not None and b["confidence"] < 0.01]
+    assert suspect and all(14.0 <= t <= 17.0 for t in suspect)
+    assert (tmp_path / "cl" / "confidence.html").exists()
+    out = tmp_path / "an"
+    res = CliRunner().invoke(main, ["analyze", str(sim), "-o", str(out), "--service", "LPV"])
+    assert res.exit_code == 0, res.output
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["confidence"]["vertical"]["suspect_targets"] == suspect
+    assert set(summary["confidence"]) == {"vertical", "horizontal"}  # the simulator writes east/north
+    page = (out / "report.html").read_text()
+    assert '<section id="confidence-vertical">' in page and '<section id="confidence-horizontal">' in page
+    assert json.loads((out / "confidence-vertical.json").read_text())["bins"] == doc["bins"]
+    res = CliRunner().invoke(main, ["analyze", str(sim), "-o", str(tmp_path / "nc"), "--no-confidence"])
+    assert res.exit_code == 0 and "confidence-vertical" not in (tmp_path / "nc" / "report.html").read_text()

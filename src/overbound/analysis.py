@@ -11,6 +11,7 @@ import polars as pl
 from overbound.io.geodesy import Reference
 from overbound.io.open import Source, read, source_name
 from overbound.io.schema import InputError, ReadReport, validate_epochs
+from overbound.methods.confidence_level import ConfidenceAnalysis, confidence_analysis
 from overbound.methods.counting import CountingResult, count_kpis
 from overbound.services import ServiceLevel, resolve_services
 
@@ -28,6 +29,7 @@ class Analysis:
     services : the service levels analysed.
     counting : the counting KPIs.
     title : a label for the report (the inputs' names).
+    confidence : the PL confidence-level analyses (Comby et al. 2003), one per axis analysed.
     """
 
     table: pl.DataFrame
@@ -35,6 +37,7 @@ class Analysis:
     services: tuple[ServiceLevel, ...]
     counting: CountingResult
     title: str
+    confidence: tuple[ConfidenceAnalysis, ...] = ()
 
     @property
     def n_rejected(self) -> int:
@@ -101,6 +104,7 @@ def analyze(
     title: str | None = None,
     columns: Sequence[str] | None = (),
     time_range: tuple[dt.datetime | None, dt.datetime | None] | None = None,
+    confidence: Sequence[str] | None = (),
     progress: Callable[[str], None] | None = None,
 ) -> Analysis:
     """Read ``inputs`` (or take an epoch table) and count the KPIs for each service.
@@ -111,6 +115,10 @@ def analyze(
     columns to keep (default none: the counting needs only the required ones, and a
     year of 1 Hz ``east``/``north`` is half a gigabyte); ``None`` keeps all.
     ``time_range`` keeps the epochs with ``start <= time < stop`` (GPS time).
+    ``confidence`` names the axes of the PL confidence-level analysis (Comby et al. 2003,
+    :func:`~overbound.methods.confidence_level.confidence_analysis` with its defaults) to
+    run: ``()`` none (the default), ``None`` vertical plus horizontal when the table has
+    ``east``/``north`` (read them with ``columns``).
     """
     if isinstance(inputs, pl.DataFrame):
         table, reports = validate_epochs(inputs), ()
@@ -131,7 +139,24 @@ def analyze(
     levels = _levels(services)
     if progress:
         progress("counting KPIs")
-    return Analysis(table, reports, levels, count_kpis(table, levels), label)
+    counting = count_kpis(table, levels)
+    axes = _confidence_axes(table) if confidence is None else tuple(confidence)
+    if axes and progress:
+        progress("PL confidence level")
+    return Analysis(
+        table,
+        reports,
+        levels,
+        counting,
+        label,
+        tuple(confidence_analysis(table, axis=a) for a in axes),
+    )
+
+
+def _confidence_axes(table: pl.DataFrame) -> tuple[str, ...]:
+    """Vertical always; horizontal when the table has signed east/north errors."""
+    has_en = {"east", "north"} <= set(table.columns) and table["east"].is_not_nan().any()
+    return ("vertical", "horizontal") if has_en else ("vertical",)
 
 
 def _levels(services: Sequence[str] | Sequence[ServiceLevel] | None) -> tuple[ServiceLevel, ...]:

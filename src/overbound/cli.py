@@ -155,24 +155,42 @@ def _read_options(reference, reference_ecef, fmt, station, strict, start, end, c
     type=click.Path(dir_okay=False, path_type=Path),
     help="Also write the pooled epoch table (.parquet or .csv).",
 )
-def analyze(inputs, out_dir, services, epochs_out, **inputs_opts) -> None:
+@click.option(
+    "--confidence/--no-confidence",
+    default=True,
+    show_default=True,
+    help="Add the PL confidence level per PL band (vertical; horizontal too with east/north errors).",
+)
+def analyze(inputs, out_dir, services, epochs_out, confidence, **inputs_opts) -> None:
     """Analyse receiver output INPUTS: write OUTPUT/summary.json and OUTPUT/report.html."""
     paths = _run_analysis(
-        list(inputs), out_dir, services=services, epochs_out=epochs_out, **_read_options(**inputs_opts)
+        list(inputs),
+        out_dir,
+        services=services,
+        epochs_out=epochs_out,
+        confidence=confidence,
+        **_read_options(**inputs_opts),
     )
     click.echo(f"report: {paths[1]}")
     click.echo(f"summary: {paths[0]}")
 
 
-def _run_analysis(inputs, out_dir: Path, *, services=(), epochs_out=None, title=None, **read_opts):
+def _run_analysis(
+    inputs, out_dir: Path, *, services=(), epochs_out=None, title=None, confidence=True, **read_opts
+):
     """Analyse, write summary.json and report.html (and the epoch table); return their paths."""
     from overbound.analysis import analyze as run
     from overbound.io.table import write_epochs
+    from overbound.report.confidence import json_name, write_confidence
     from overbound.report.html import write_report
     from overbound.report.json import summary_dict, write_summary
 
+    if epochs_out:
+        columns = None  # the epoch table written keeps every column
+    else:
+        columns = ("east", "north", "alert") if confidence else ()
     with _progress() as bar:
-        task = bar.add_task("reading", total=len(inputs) + 3)
+        task = bar.add_task("reading", total=len(inputs) + 4)
 
         def step(what: str) -> None:
             bar.update(task, description=f"{what}", advance=1)
@@ -182,10 +200,13 @@ def _run_analysis(inputs, out_dir: Path, *, services=(), epochs_out=None, title=
             services=list(services) or None,
             title=title,
             **read_opts,
-            columns=None if epochs_out else (),  # the epoch table written keeps every column
+            columns=columns,
+            confidence=None if confidence else (),
             progress=step,
         )
         out_dir.mkdir(parents=True, exist_ok=True)
+        for c in result.confidence:
+            write_confidence(c, out_dir / json_name(c.axis))
         step("writing summary.json")
         summary = write_summary(result, out_dir / "summary.json")
         step("drawing report.html")

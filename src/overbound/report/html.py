@@ -23,7 +23,6 @@ import numpy as np
 
 from overbound import __version__
 from overbound.analysis import Analysis, Verdict, verdicts
-from overbound.methods.confidence_level import ConfidenceAnalysis
 from overbound.methods.counting import (
     AXES,
     SAFETY_PERCENTILES,
@@ -62,7 +61,6 @@ def write_report(
     directory: str | Path,
     *,
     summary: dict | None = None,
-    confidence: tuple[ConfidenceAnalysis, ...] = (),
 ) -> Path:
     """Write ``report.html`` into ``directory`` (created if needed); return its path.
 
@@ -82,37 +80,35 @@ def write_report(
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / REPORT_NAME
-    path.write_bytes(render_report(analysis, summary=summary, confidence=confidence).encode("utf-8"))
+    path.write_bytes(render_report(analysis, summary=summary).encode("utf-8"))
     return path
 
 
-def section_ids(analysis: Analysis, confidence: tuple[ConfidenceAnalysis, ...] = ()) -> tuple[str, ...]:
+def section_ids(analysis: Analysis) -> tuple[str, ...]:
     """The ``id`` of every ``<section>`` of the report of ``analysis``, in page order."""
     return (
         "overview",
         "accuracy",
         *(("stations",) if analysis.counting.by_station else ()),
         *(_service_id(s) for s in analysis.services),
-        *(f"confidence-{c.axis}" for c in confidence),
+        *(f"confidence-{c.axis}" for c in analysis.confidence),
         "time-series",
         "method-notes",
         "summary-data",
     )
 
 
-def render_report(
-    analysis: Analysis, *, summary: dict | None = None, confidence: tuple[ConfidenceAnalysis, ...] = ()
-) -> str:
+def render_report(analysis: Analysis, *, summary: dict | None = None) -> str:
     """The text of ``report.html`` (see :func:`write_report`)."""
     doc = summary if summary is not None else summary_dict(analysis)
     c = analysis.counting
     body = [
-        _header(analysis, confidence),
+        _header(analysis),
         _overview(analysis),
         _accuracy(c),
         *((_stations(analysis),) if c.by_station else ()),
         *(_service(analysis, s) for s in analysis.services),
-        *(confidence_section_html(c) for c in confidence),
+        *(confidence_section_html(c) for c in analysis.confidence),
         _time_series(analysis),
         _method_notes(c),
         _section(
@@ -245,14 +241,14 @@ def _render(ax, name: str, alt: str, caption: str) -> _Figure:
 # sections
 
 
-def _header(a: Analysis, confidence: tuple[ConfidenceAnalysis, ...] = ()) -> str:
+def _header(a: Analysis) -> str:
     links = "".join(
         f'<li><a href="#{_e(sid)}">{_e(label)}</a></li>'
         for sid, label in [
             ("overview", "Overview"),
             ("accuracy", "Accuracy"),
             *((_service_id(s), s.name) for s in a.services),
-            *((f"confidence-{c.axis}", f"{c.axis.capitalize()} PL confidence") for c in confidence),
+            *((f"confidence-{c.axis}", f"{c.axis.capitalize()} PL confidence") for c in a.confidence),
             ("time-series", "Time series"),
             ("method-notes", "Method notes"),
             ("summary-data", "Summary data"),

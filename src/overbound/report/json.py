@@ -4,7 +4,8 @@ Keys are sorted and floats are written with 12 significant digits, so that the s
 inputs give the same bytes on every run. NaN and infinities become ``null``.
 Schema ``overbound.summary/1``; keys listed in the foundation issue are stable,
 others may be added. ``stations`` holds the same KPIs per station when the input has
-several stations (empty otherwise).
+several stations (empty otherwise); ``confidence`` the PL confidence level of each axis
+analysed in brief (bins rated, the suspect bands with a confidence below 1 %, the worst band).
 """
 
 from __future__ import annotations
@@ -138,6 +139,18 @@ def summary_dict(analysis: Analysis) -> dict:
         "safety_index": {a: dataclasses.asdict(c.safety[a]) for a in AXES},
         "services": services,
         "stations": {name: _station_dict(sc, analysis.services) for name, sc in c.by_station.items()},
+        "confidence": {a.axis: _confidence_brief(a) for a in analysis.confidence},
+    }
+
+
+def _confidence_brief(a) -> dict:
+    """The PL confidence level in a few numbers; the bins are in ``confidence-<axis>.json``."""
+    worst = None if a.worst is None else a.bins[a.worst]
+    return {
+        "n_bins": len(a.bins),
+        "n_bins_rated": sum(b.sufficient for b in a.bins),
+        "suspect_targets": [a.bins[i].target for i in a.suspect],
+        "worst": None if worst is None else {"target": worst.target, "confidence": worst.confidence},
     }
 
 
