@@ -370,3 +370,19 @@ def test_parquet_not_parquet(tmp_path: Path) -> None:
         read_parquet(path)
     with pytest.raises(InputError, match="not a readable Parquet file"):
         read_epochs_metadata(path)
+
+
+@pytest.mark.parametrize(
+    ("row", "got"),
+    [("2024-01-07T00:00:01,A,1,1,10", 5), ("2024-01-07T00:00:01,A,1,1,10,12,99", 7)],
+)
+def test_gh2_ragged_csv_line_is_malformed_not_an_empty_cell(row, got):
+    """A row with too few or too many fields is rejected as malformed, naming its line."""
+    good = "2024-01-07T00:00:00,A,1,1,10,12"
+    text = f"time,station,hpe,vpe,hpl,vpl\n{good}\n{row}\n{good.replace(':00,', ':02,')}\n"
+    table, report = read_csv(io.StringIO(text))
+    assert table.height == 2
+    assert report.rejected == {"malformed_line": 1} and report.invalidated == {}
+    assert report.first_bad == f"3: malformed line: expected 6 fields, got {got}"
+    with pytest.raises(InputError, match=r":3: malformed line: expected 6 fields"):
+        read_csv(io.StringIO(text), strict=True)

@@ -195,8 +195,13 @@ def read_csv(
         if isinstance(source, str | Path):
             stream.close()
     try:
+        # Long rows are truncated by polars only when _ragged_rows can see and reject them
+        # (no quotes in the file); otherwise polars refuses the file.
         raw = pl.read_csv(
-            io.BytesIO(data), infer_schema=False, encoding="utf8-lossy", truncate_ragged_lines=False
+            io.BytesIO(data),
+            infer_schema=False,
+            encoding="utf8-lossy",
+            truncate_ragged_lines=b'"' not in data,
         )
     except pl.exceptions.NoDataError:
         raise InputError(name, "empty file: no header line") from None
@@ -204,9 +209,51 @@ def read_csv(
         raise InputError(name, f"not a readable CSV file: {str(exc).splitlines()[0]}") from None
     lines = pl.Series("_line", np.arange(2, raw.height + 2, dtype=np.int64))
     blank = raw.select(pl.all_horizontal(pl.all().is_null() | (pl.all().str.strip_chars() == ""))).to_series()
-    if blank.any():
-        raw, lines = raw.filter(~blank), lines.filter(~blank)
-    return _to_epochs(raw, lines, name, "csv", reference, station, strict, mapping, ())
+    log = RowLog(name, strict=strict)
+    ragged = _ragged_rows(data, raw.width, raw.height) & ~blank.to_numpy()
+    for i in np.flatnonzero(ragged)[:1].tolist():
+        log.reject(int(lines[i]), f"malformed line: expected {raw.width} fields, got {_fields(data, i + 1)}")
+    if ragged.sum() > 1:
+        log.rejected["malformed_line"] += int(ragged.sum()) - 1
+    log.rows_read = int(ragged.sum())
+    drop = blank | pl.Series(ragged)
+    if drop.any():
+        raw, lines = raw.filter(~drop), lines.filter(~drop)
+    return _to_epochs(raw, lines, name, "csv", reference, station, strict, mapping, (), log)
+
+
+def _line_bounds(data: bytes) -> tuple[np.ndarray, np.ndarray]:
+    """Start and end offsets of every line of ``data`` (``\\n`` or ``\\r\\n`` endings)."""
+    buf = np.frombuffer(data, dtype=np.uint8)
+    nl = np.flatnonzero(buf == 0x0A)
+    starts = np.concatenate(([0], nl + 1))
+    ends = np.concatenate((nl, [buf.size]))
+    return starts, ends
+
+
+def _ragged_rows(data: bytes, width: int, n_rows: int) -> np.ndarray:
+    """Data rows whose number of comma-separated fields differs from the header's.
+
+    polars pads a short row with nulls, which would otherwise pass for empty cells.
+    Counted from the separators of each line; skipped (nothing ragged) when the file has
+    quote characters, since a quoted field may hold commas or newlines.
+    """
+    if b'"' in data or n_rows == 0:
+        return np.zeros(n_rows, dtype=bool)
+    buf = np.frombuffer(data, dtype=np.uint8)
+    starts, _ = _line_bounds(data)
+    commas = np.concatenate(([0], np.cumsum(buf == 0x2C)))
+    per_line = np.diff(np.concatenate((commas[starts], [commas[-1]])))
+    fields = per_line[1 : 1 + n_rows] + 1  # line 1 is the header
+    if fields.size < n_rows:  # polars and the byte count disagree: do not guess
+        return np.zeros(n_rows, dtype=bool)
+    return fields != width
+
+
+def _fields(data: bytes, line_index: int) -> int:
+    """Number of comma-separated fields of 0-based line ``line_index``."""
+    starts, ends = _line_bounds(data)
+    return data[starts[line_index] : ends[line_index]].rstrip(b"\r").count(b",") + 1
 
 
 def write_epochs(
@@ -322,8 +369,12 @@ def _to_epochs(
     strict: bool,
     mapping: Mapping[str, str] | None,
     notes: tuple[str, ...],
+    log: RowLog | None = None,
 ) -> tuple[pl.DataFrame, ReadReport]:
-    """Columns of any layout -> epoch table; ``lines`` numbers the rows of ``raw``."""
+    """Columns of any layout -> epoch table; ``lines`` numbers the rows of ``raw``.
+
+    ``log`` carries rows the caller already rejected (they are not in ``raw``).
+    """
     cols = _resolve(raw, name, mapping)
     has = set(cols)
     pos_mode = not ({"vpe"} <= has and ({"hpe"} <= has or {"east", "north"} <= has))
@@ -335,8 +386,8 @@ def _to_epochs(
         )
     if raw.height == 0:
         raise InputError(name, "no epochs (no data rows)")
-    log = RowLog(name, strict=strict)
-    log.rows_read = raw.height
+    log = log or RowLog(name, strict=strict)
+    log.rows_read += raw.height
     notes_l = list(notes)
 
     parsed: dict[str, pl.Series] = {}
