@@ -31,6 +31,7 @@ __all__ = [
     "gpd_isf",
     "gpd_logpdf",
     "gpd_sf",
+    "profile_ci_exceedance",
 ]
 
 #: Shapes below this are non-regular: the MLE is not asymptotically normal (Smith 1985).
@@ -684,3 +685,137 @@ def fit_gev(block_maxima: np.ndarray) -> GEVFit:
     if success and xi <= -1.0:
         success, message = False, "shape <= -1: likelihood unbounded"
     return GEVFit(xi=xi, loc=loc, scale=scale, n=n, loglik=ll, success=success, message=message)
+
+
+# --------------------------------------------------------------------------------------------------
+# Profile likelihood of an exceedance probability
+
+_XI_GRID = np.concatenate([np.linspace(-1.0 + 1e-6, 1.0, 161), np.linspace(1.05, 4.0, 40)])
+
+
+def _loglik_at_p(y: np.ndarray, d: float, logp: float, xi: np.ndarray) -> np.ndarray:
+    r"""GPD log-likelihood of ``y`` at shapes ``xi`` with the scale tied to :math:`\bar G(d) = p`.
+
+    :math:`\sigma_p(\xi) = d / (\ell\,\mathrm{exprel}(\xi\ell))`, :math:`\ell = -\log p`; ``logp = -inf``
+    (p = 0) is the boundary endpoint :math:`= d`, :math:`\sigma = -\xi d` (only for :math:`\xi < 0`).
+    """
+    xi = np.atleast_1d(np.asarray(xi, dtype=float))
+    if np.isneginf(logp):
+        sig = np.where(xi < 0, -xi * d, np.nan)
+    else:
+        ell = -logp
+        with np.errstate(over="ignore", divide="ignore"):
+            sig = d / (ell * special.exprel(xi * ell))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        z = y[None, :] / sig[:, None]
+    w = xi[:, None] * z
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        ll = -y.size * np.log(sig) - (1.0 + xi) * np.sum(z * _log1prel(w), axis=1)
+        inside = np.all(w > -1.0, axis=1) & (sig > 0)
+    return np.where(inside & np.isfinite(ll), ll, -np.inf)
+
+
+def _profile_at_p(y: np.ndarray, d: float, logp: float) -> float:
+    """:math:`\\max_\\xi` of :func:`_loglik_at_p`: grid scan, then bounded Brent around the best point."""
+    ll = _loglik_at_p(y, d, logp, _XI_GRID)
+    k = int(np.argmax(ll))
+    if not np.isfinite(ll[k]):
+        return -math.inf
+    lo = _XI_GRID[max(k - 1, 0)]
+    hi = _XI_GRID[min(k + 1, _XI_GRID.size - 1)]
+    r = optimize.minimize_scalar(
+        lambda t: -float(_loglik_at_p(y, d, logp, np.array([t]))[0]),
+        bounds=(lo, hi),
+        method="bounded",
+        options={"xatol": 1e-10},
+    )
+    return max(float(ll[k]), -float(r.fun))
+
+
+def profile_ci_exceedance(fit: GPDFit, x: float, *, level: float = 0.95) -> tuple[float, float]:
+    r"""Profile-likelihood interval for the conditional exceedance probability :math:`p = \bar G(x - u)`.
+
+    Parameters
+    ----------
+    fit
+        GPD fit (its excesses are used).
+    x
+        Level above the threshold (for :math:`P_{MI}`: SI = 1).
+    level
+        Confidence level (:math:`\chi^2_1` cut).
+
+    Returns
+    -------
+    tuple of float
+        ``(lower, upper)`` for :math:`P(X > x \mid X > u)`; multiply by :math:`\zeta_u` for the
+        unconditional probability.
+
+    Notes
+    -----
+    Reparametrise the GPD by :math:`(\xi, p)` with :math:`p = \bar G(d)`, :math:`d = x - u`: for a
+    fixed :math:`p` the scale is tied to the shape,
+
+    .. math:: \sigma_p(\xi) = \frac{\xi d}{p^{-\xi} - 1} = \frac{d}{\ell\,\mathrm{exprel}(\xi \ell)},
+              \qquad \ell = -\log p,
+
+    and the profile :math:`\ell_p(p) = \max_\xi \ell(\xi, \sigma_p(\xi))` gives the interval
+    :math:`\{p: 2(\hat\ell - \ell_p(p)) \le \chi^2_1(\text{level})\}` (Coles 2001, section 4.3.3, for
+    return levels; here for the probability). The ends are found by Brent's method in :math:`\log p`.
+
+    Finite endpoint: :math:`p = 0` is admissible (the level lies at or beyond the endpoint
+    :math:`u - \sigma/\xi`, :math:`\xi < 0`); its profile is the maximum over the boundary
+    "endpoint = :math:`x`", :math:`\sigma = -\xi d`, which requires :math:`x \ge \max` of the data. If it
+    is within the cut, the lower end is reported as exactly 0. When :math:`\hat p = 0` the profile
+    jumps at 0 (every :math:`p > 0` forces the endpoint beyond :math:`x`): the result is
+    ``(0, upper)`` with ``upper`` the largest :math:`p > 0` inside the cut, or ``(0, 0)`` if none is.
+    Shapes are searched on :math:`(-1, 4]`.
+    """
+    if not 0.0 < level < 1.0:
+        raise ValueError(f"level must be in (0, 1), got {level}")
+    y = fit.excesses
+    d = float(x) - fit.threshold
+    if d <= 0:
+        raise ValueError(f"x must lie above the threshold {fit.threshold}, got {x}")
+    cut = fit.loglik - 0.5 * float(stats.chi2.isf(1.0 - level, 1))
+    p_hat = float(fit.sf(x))
+
+    def f(lp: float) -> float:
+        return _profile_at_p(y, d, lp) - cut
+
+    # p = 0 set {endpoint <= x}: the MLE itself when p_hat = 0, else its boundary endpoint = x
+    if p_hat == 0.0:
+        at_zero = fit.loglik
+    else:
+        at_zero = _profile_at_p(y, d, -math.inf) if d >= float(np.max(y)) else -math.inf
+    if p_hat == 0.0:
+        # The profile jumps at p = 0 (p > 0 forces the endpoint beyond x): scan p > 0 on a grid of
+        # log p and report the hull [0, upper] of {0} and the p > 0 part of the set (empty: upper 0).
+        grid = -np.geomspace(700.0, 1e-3, 80)
+        ok = np.flatnonzero([f(float(v)) >= 0 for v in grid])
+        if ok.size == 0:
+            return 0.0, 0.0
+        j = int(ok[-1])
+        if j == grid.size - 1:
+            return 0.0, 1.0
+        return 0.0, math.exp(optimize.brentq(f, float(grid[j]), float(grid[j + 1]), xtol=1e-10))
+    # upper end: from log p_hat up towards log p = 0 (p = 1 has no likelihood)
+    start = math.log(p_hat)
+    hi_lp = start
+    while True:
+        hi_lp = min(hi_lp + 1.0, 0.5 * hi_lp) if hi_lp < -2.0 else 0.5 * hi_lp
+        if f(hi_lp) < 0:
+            upper = math.exp(optimize.brentq(f, start, hi_lp, xtol=1e-10))
+            break
+        if hi_lp > -1e-12:
+            upper = 1.0
+            break
+    if at_zero >= cut:
+        return 0.0, upper
+    lo_lp, step = math.log(p_hat), 1.0
+    while True:
+        cand = lo_lp - step
+        if f(cand) < 0:
+            return math.exp(optimize.brentq(f, cand, lo_lp, xtol=1e-10)), upper
+        if cand < -740.0:
+            return 0.0, upper
+        lo_lp, step = cand, 2.0 * step
