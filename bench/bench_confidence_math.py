@@ -11,23 +11,12 @@ under 50 ms.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 
 import numpy as np
 
+from _timing import median_time
 from overbound.stats.confidence import confidence_level, confidence_level_bruteforce, pl_at_confidence
 from overbound.stats.overbounding import sigma_inflation
-
-
-def median_time(fn: Callable[[], object], repeat: int) -> float:
-    """Median wall time (s) of ``repeat`` calls after one warm-up call."""
-    fn()
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times))
 
 
 def band(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:

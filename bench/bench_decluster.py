@@ -12,27 +12,14 @@ give the same cluster maxima.
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
-
 import numpy as np
 import scipy.signal
 
+from _timing import median_time
 from overbound.stats.dependence import cluster_gap, decluster_runs, extremal_index, vk_curve
 
 N = 1_000_000
 RUN_LENGTH_S = 30.0
-
-
-def median_time(fn: Callable[[], object], repeat: int) -> float:
-    """Median wall time (s) of ``repeat`` calls after one warm-up call."""
-    fn()
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times))
 
 
 def safety_index(n: int, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
