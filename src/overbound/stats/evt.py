@@ -661,6 +661,9 @@ def fit_gev(block_maxima: np.ndarray) -> GEVFit:
         raise ValueError("block maxima are all equal")
 
     def nll(p: np.ndarray) -> float:
+        # An optimiser step can take log-scale to +-hundreds: exp() then under- or overflows.
+        if not -700.0 < p[2] < 700.0 or not np.all(np.isfinite(p)):
+            return 1e300
         v = -float(np.sum(gev_logpdf(x, xi=p[0], loc=p[1], scale=math.exp(p[2]))))
         return v if np.isfinite(v) else 1e300
 
