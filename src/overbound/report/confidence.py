@@ -14,8 +14,6 @@
 
 from __future__ import annotations
 
-import base64
-import html
 import math
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
@@ -33,8 +31,9 @@ from overbound.methods.confidence_level import (
     ConfidenceBin,
     confidence_analysis,
 )
-from overbound.report.figures import close_figure, figure_png, new_figure, style
+from overbound.report.figures import new_figure, style
 from overbound.report.json import dumps
+from overbound.report.page import PAGE_CSS, escape, figure_html
 from overbound.stats.overbounding import SigmaInflation
 
 __all__ = [
@@ -60,7 +59,6 @@ REPORT_NAME = "confidence.html"
 _CL_FLOOR = 1e-6
 #: At most this many suspect bins get their own figures (the lowest CLs first).
 _MAX_DETAIL_BINS = 6
-_DPI = 110
 _PE = {"vertical": "VPE", "horizontal": "HPE"}
 _PL = {"vertical": "VPL", "horizontal": "HPL"}
 _ABS = {"vertical": "|VPE|", "horizontal": "HPE"}
@@ -389,8 +387,7 @@ def plot_band_errors(
 # HTML
 
 
-def _e(text: object) -> str:
-    return html.escape(str(text), quote=True)
+_e = escape
 
 
 def _text_cl(x: float) -> str:
@@ -411,17 +408,7 @@ def _h_m(x: float) -> str:
 
 
 def _figure(ax: Axes, name: str, alt: str, caption: str) -> str:
-    fig = ax.figure
-    try:
-        png = figure_png(fig, dpi=_DPI)
-    finally:
-        close_figure(fig)
-    width, height = int.from_bytes(png[16:20], "big"), int.from_bytes(png[20:24], "big")
-    data = base64.b64encode(png).decode("ascii")
-    return (
-        f'<figure><img src="data:image/png;base64,{data}" width="{width}" height="{height}" '
-        f'alt="{_e(alt)}" data-figure="{_e(name)}"><figcaption>{_e(caption)}</figcaption></figure>'
-    )
+    return figure_html(ax, name=name, alt=alt, caption=caption)
 
 
 def _detail_bins(analysis: ConfidenceAnalysis) -> list[int]:
@@ -566,28 +553,6 @@ def confidence_section_html(analysis: ConfidenceAnalysis) -> str:
     return f'<section id="{sid}">\n<h2>{_e(title)}</h2>\n' + "\n".join(parts) + "\n</section>"
 
 
-_CSS = """
-body{margin:0;color:#1d2733;font-family:system-ui,-apple-system,"Segoe UI",Roboto,"DejaVu Sans",Arial,
-sans-serif;line-height:1.45}
-main{max-width:1180px;margin:0 auto;padding:0 24px 48px}
-h1{font-size:1.7rem;margin:.8em 0 .2em}
-h2{font-size:1.35rem;margin:.3em 0 .5em}
-h3{font-size:1.02rem;margin:1.2em 0 .4em;color:#5b6673}
-section{padding:18px 0 8px;border-bottom:1px solid #d5dbe1}
-table{border-collapse:collapse;margin:6px 0 12px;font-size:.85rem;font-variant-numeric:tabular-nums;
-width:100%}
-th,td{border-bottom:1px solid #d5dbe1;padding:3px 7px;text-align:left}
-th{background:#f4f6f8;white-space:nowrap}
-.num{text-align:right;white-space:nowrap}
-tr.suspect{background:#fbe4e2}
-.alarm{color:#b3261e;font-weight:700}
-figure{margin:8px 0}
-figure img{max-width:100%;height:auto;display:block;border:1px solid #d5dbe1}
-figcaption{color:#5b6673;font-size:.8rem}
-.figrow{display:grid;grid-template-columns:repeat(auto-fit,minmax(360px,1fr));gap:14px;align-items:start}
-"""
-
-
 def write_confidence_report(
     analyses: ConfidenceAnalysis | Sequence[ConfidenceAnalysis],
     directory: str | Path,
@@ -607,7 +572,7 @@ def write_confidence_report(
         '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
         '<meta name="viewport" content="width=device-width, initial-scale=1">\n'
         f'<meta name="generator" content="overbound {_e(__version__)}">\n'
-        f"<title>{_e(title)} — overbound</title>\n<style>{_CSS}</style>\n</head>\n<body>\n<main>\n"
+        f"<title>{_e(title)} — overbound</title>\n<style>{PAGE_CSS}</style>\n</head>\n<body>\n<main>\n"
         f"<h1>{_e(title)}</h1>\n<p>Method of Comby, Farnworth and Macabiau, “EGNOS vertical protection "
         "level assessment”, ION GPS/GNSS 2003: per PL band, independent samples, cdf overbounding, "
         "and the probability that the PLs bound the errors at the integrity risk.</p>\n"

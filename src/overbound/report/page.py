@@ -1,0 +1,104 @@
+"""Pieces shared by overbound's self-contained HTML pages: the style sheet and embedded figures."""
+
+from __future__ import annotations
+
+import base64
+import html
+
+from matplotlib.axes import Axes
+
+from overbound.report.figures import close_figure, figure_png
+
+__all__ = ["FIGURE_DPI", "PAGE_CSS", "escape", "figure_html"]
+
+#: Resolution of the figures embedded in the pages.
+FIGURE_DPI = 110
+
+
+def escape(text: object) -> str:
+    """``text`` escaped for HTML text and attribute values."""
+    return html.escape(str(text), quote=True)
+
+
+def figure_html(ax: Axes, *, name: str, alt: str, caption: str) -> str:
+    """Render ``ax``'s figure to a PNG, close it, and return a ``<figure>`` with the PNG inline.
+
+    The ``<img>`` carries its pixel size, ``alt`` text and a ``data-figure`` name (for tests and
+    readers); the page loads nothing.
+    """
+    fig = ax.figure
+    try:
+        png = figure_png(fig, dpi=FIGURE_DPI)
+    finally:
+        close_figure(fig)
+    width, height = int.from_bytes(png[16:20], "big"), int.from_bytes(png[20:24], "big")
+    data = base64.b64encode(png).decode("ascii")
+    return (
+        f'<figure><img src="data:image/png;base64,{data}" width="{width}" height="{height}" '
+        f'alt="{escape(alt)}" data-figure="{escape(name)}">'
+        f"<figcaption>{escape(caption)}</figcaption></figure>"
+    )
+
+
+#: Style sheet of every overbound page (inline: the pages are self-contained).
+PAGE_CSS = """
+:root{--ink:#1d2733;--muted:#5b6673;--line:#d5dbe1;--band:#f4f6f8;--accent:#1f5fa8;
+--pass:#1b7a3a;--pass-bg:#e3f4e8;--fail:#b3261e;--fail-bg:#fbe4e2;--na:#5b6673;--na-bg:#eceff2}
+*{box-sizing:border-box}
+html{font-size:15px}
+body{margin:0;color:var(--ink);background:#fff;
+font-family:system-ui,-apple-system,"Segoe UI",Roboto,"Helvetica Neue","DejaVu Sans",Arial,sans-serif;
+line-height:1.45}
+main{max-width:1180px;margin:0 auto;padding:0 24px 48px}
+header{border-bottom:3px solid var(--accent);padding:28px 0 14px;margin-bottom:8px}
+.kicker{margin:0;color:var(--accent);font-weight:600;letter-spacing:.06em;text-transform:uppercase;font-size:.8rem}
+h1{margin:.15em 0 .1em;font-size:1.9rem;overflow-wrap:anywhere}
+.sub{margin:0 0 12px;color:var(--muted)}
+nav ul{list-style:none;margin:0;padding:0;display:flex;flex-wrap:wrap;gap:6px}
+nav a{display:inline-block;padding:3px 10px;border:1px solid var(--line);border-radius:14px;
+color:var(--accent);text-decoration:none;font-size:.85rem;background:var(--band)}
+section{padding:18px 0 8px;border-bottom:1px solid var(--line)}
+h2{font-size:1.4rem;margin:.3em 0 .5em;color:var(--ink)}
+h3{font-size:1.05rem;margin:1.2em 0 .4em;color:var(--muted)}
+p{max-width:75em}
+code{font-family:ui-monospace,"DejaVu Sans Mono",Menlo,Consolas,monospace;font-size:.9em}
+dl.facts{display:grid;grid-template-columns:max-content 1fr;gap:3px 18px;margin:0 0 8px}
+dl.facts dt{color:var(--muted)}
+dl.facts dd{margin:0;font-variant-numeric:tabular-nums}
+table{border-collapse:collapse;margin:6px 0 12px;font-size:.9rem;font-variant-numeric:tabular-nums;width:100%}
+caption{caption-side:bottom;text-align:left;color:var(--muted);font-size:.8rem;padding-top:4px}
+th,td{border-bottom:1px solid var(--line);padding:4px 8px;text-align:left;vertical-align:top}
+th{background:var(--band);font-weight:600;border-bottom:2px solid var(--line);white-space:nowrap}
+tbody tr:nth-child(even){background:#fafbfc}
+.num{text-align:right;white-space:nowrap}
+td small{color:var(--muted)}
+.alarm{color:var(--fail);font-weight:700}
+tr.suspect{background:var(--fail-bg)}
+.badge{display:inline-block;min-width:3.6em;text-align:center;padding:1px 8px;border-radius:10px;
+font-weight:700;font-size:.78rem;letter-spacing:.04em;border:1px solid}
+.badge.pass{color:var(--pass);background:var(--pass-bg);border-color:var(--pass)}
+.badge.fail{color:var(--fail);background:var(--fail-bg);border-color:var(--fail)}
+.badge.na{color:var(--na);background:var(--na-bg);border-color:#b8c0c8}
+.limits{color:var(--muted)}
+.swatch{display:inline-block;width:.9em;height:.9em;border:1px solid #999;margin:0 3px 0 8px;
+vertical-align:-1px}
+figure{margin:8px 0;break-inside:avoid}
+figure img{max-width:100%;height:auto;display:block;border:1px solid var(--line)}
+figcaption{color:var(--muted);font-size:.8rem;margin-top:3px}
+.figrow{display:grid;grid-template-columns:repeat(auto-fit,minmax(360px,1fr));gap:14px;align-items:start}
+dl.notes dt{font-weight:600;margin-top:.7em}
+dl.notes dd{margin:.15em 0 0;max-width:75em}
+ol.refs{font-size:.88rem;color:var(--muted)}
+details pre{background:var(--band);padding:10px;overflow:auto;max-height:40em;font-size:.75rem}
+@media print{
+html{font-size:10.5pt}
+main{max-width:none;padding:0}
+nav,#summary-data{display:none}
+section{break-inside:auto;border:none}
+section[id^="service-"],#time-series,#method-notes{break-before:page}
+table,figure,tr{break-inside:avoid}
+th{white-space:normal}
+.badge,th,.swatch,tbody tr{-webkit-print-color-adjust:exact;print-color-adjust:exact}
+}
+@page{size:A4;margin:14mm}
+"""
