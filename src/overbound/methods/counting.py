@@ -18,6 +18,7 @@ import polars as pl
 
 from overbound.io.schema import as_numpy
 from overbound.services import ServiceLevel
+from overbound.stats.dependence import nominal_interval_us
 
 __all__ = [
     "AXES",
@@ -363,19 +364,9 @@ class _Grid:
 
 
 def _grid(time_us: np.ndarray) -> _Grid | None:
-    if time_us.size < 2:
+    dt = nominal_interval_us(time_us)
+    if dt is None:
         return None
-    steps = np.diff(time_us)
-    steps = steps[steps > 0]
-    if steps.size == 0:
-        return None
-    # Nominal interval: the mean of the steps within 25 % of the median step, so that gaps
-    # are left out and time-tag jitter averages away. (polars' median: numpy's introselect
-    # degrades on millions of equal steps with a few large ones.)
-    st = pl.Series(steps)
-    med = st.median()
-    dt = round(st.filter((st - med).abs() <= med / 4).mean())
-    del steps, st
     # nearest grid slot, in integers and in place (no float temporaries of the whole series)
     k = time_us - (time_us[0] - dt // 2)
     k //= dt

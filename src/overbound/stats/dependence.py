@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import Literal
 
 import numpy as np
+import polars as pl
 import scipy.signal
 
 __all__ = [
@@ -29,6 +30,7 @@ __all__ = [
     "decorrelation_time",
     "extremal_index",
     "extremal_index_runs",
+    "nominal_interval_us",
     "regular_series",
     "select_spaced",
     "vk_curve",
@@ -213,6 +215,26 @@ class RegularSeries:
         return np.arange(self.values.size) * self.interval_s
 
 
+def nominal_interval_us(time_us: np.ndarray) -> int | None:
+    """Nominal sampling interval (integer microseconds) of sorted epoch times; ``None`` without two times.
+
+    The mean of the positive time steps within 25 % of their median: gaps are left out and
+    time-tag jitter averages away; the smallest step when no step is that close to the median.
+    The median is polars' (numpy's introselect degrades on millions of equal steps with a few
+    large ones).
+
+    >>> nominal_interval_us(np.array([0, 1_030_000, 1_980_000, 3_000_000, 10_000_000]))
+    1000000
+    """
+    steps = np.diff(np.asarray(time_us, dtype=np.int64))
+    steps = pl.Series(steps[steps > 0])
+    if steps.len() == 0:
+        return None
+    med = steps.median()
+    near = steps.filter((steps - med).abs() <= med / 4)
+    return max(round(near.mean()) if near.len() else int(steps.min()), 1)
+
+
 def _validate_regular_series(
     time_us: np.ndarray, values: np.ndarray, interval_s: float | None
 ) -> tuple[np.ndarray, np.ndarray, int]:
@@ -233,13 +255,9 @@ def _validate_regular_series(
             raise ValueError(f"interval_s must be finite and > 0, got {interval_s!r}")
         dt = round(interval_s * 1e6)
     else:
-        steps = np.diff(t)
-        steps = steps[steps > 0]
-        if steps.size == 0:
+        dt = nominal_interval_us(t)
+        if dt is None:
             raise ValueError("cannot estimate the interval: fewer than two distinct epoch times")
-        med = np.median(steps)
-        near = steps[np.abs(steps - med) <= med / 4]
-        dt = round(float(near.mean())) if near.size else int(steps.min())
     return t.astype(np.int64, copy=False), v, max(int(dt), 1)
 
 
@@ -256,10 +274,8 @@ def regular_series(
     values
         Value per epoch (e.g. the safety index), NaN for epochs without a solution.
     interval_s
-        Grid interval; by default the nominal epoch interval: the mean of the positive
-        time steps within 25 % of their median (gaps left out, jitter averaged away,
-        the rule of :mod:`overbound.methods.counting`; the smallest step when no
-        step is within 25 % of the median).
+        Grid interval; by default :func:`nominal_interval_us`, the rule the continuity
+        count of :mod:`overbound.methods.counting` uses too.
 
     Returns
     -------
