@@ -18,6 +18,7 @@ from typing import Literal
 
 import numpy as np
 import polars as pl
+import scipy.fft
 import scipy.signal
 
 __all__ = [
@@ -26,6 +27,7 @@ __all__ = [
     "VKCurve",
     "autocorrelation",
     "cluster_gap",
+    "cluster_sizes",
     "decluster_runs",
     "decorrelation_time",
     "extremal_index",
@@ -320,6 +322,13 @@ def regular_series(
 # --------------------------------------------------------------------------------------------------
 
 
+def _lagged_products(a: np.ndarray, max_lag: int) -> np.ndarray:
+    r""":math:`\sum_t a_t a_{t+k}` for ``k = 0 .. max_lag`` by one zero-padded real FFT."""
+    size = scipy.fft.next_fast_len(a.size + max_lag, real=True)
+    f = scipy.fft.rfft(a.astype(np.float64, copy=False), size)
+    return scipy.fft.irfft(f.real**2 + f.imag**2, size)[: max_lag + 1]
+
+
 def autocorrelation(x: np.ndarray, *, max_lag: int) -> np.ndarray:
     r"""Sample autocorrelation function of a regular series with missing values (NaN), by FFT.
 
@@ -355,7 +364,8 @@ def autocorrelation(x: np.ndarray, *, max_lag: int) -> np.ndarray:
 
     i.e. the mean lag-:math:`k` product over the pairs that exist, divided by the
     variance. Both sums are correlations computed by FFT
-    (:func:`scipy.signal.correlate`, ``O(n log n)``); the pair counts are rounded to
+    (one real FFT of length :math:`\ge n + m`, zero padding so no product wraps around,
+    ``O(n log n)``); the pair counts are rounded to
     integers. Choice: the *pair-count* normalisation is the unbiased-denominator
     estimator (the usual one for series with missing values); without gaps it is the
     :math:`1/(n-k)` estimator, not the usual :math:`1/n` one, so it is not damped at
@@ -378,12 +388,8 @@ def autocorrelation(x: np.ndarray, *, max_lag: int) -> np.ndarray:
     if not var > 0:
         return out
     n = a.size
-    num = scipy.signal.correlate(d, d, mode="full", method="fft")[n - 1 : n + m]
-    if nv == n:
-        cnt = np.arange(n, n - m - 1, -1, dtype=np.float64)
-    else:
-        wf = w.astype(np.float64)
-        cnt = np.rint(scipy.signal.correlate(wf, wf, mode="full", method="fft")[n - 1 : n + m])
+    num = _lagged_products(d, m)
+    cnt = np.arange(n, n - m - 1, -1, dtype=np.float64) if nv == n else np.rint(_lagged_products(w, m))
     ok = cnt > 0
     out[ok] = num[ok] / cnt[ok] / var
     out[0] = 1.0
@@ -730,6 +736,40 @@ def decluster_runs(
         float(threshold),
         float(run_length),
     )
+
+
+def cluster_sizes(time_s: np.ndarray, values: np.ndarray, clusters: Clusters, level: float) -> np.ndarray:
+    r"""Exceedances of ``level`` in each cluster whose maximum exceeds it.
+
+    Parameters
+    ----------
+    time_s, values
+        The series that ``clusters`` was formed on.
+    clusters
+        Runs declustering at a threshold :math:`u_0 \le` ``level``.
+    level
+        The level :math:`v`.
+
+    Returns
+    -------
+    numpy.ndarray
+        :math:`s_j(v) = \#\{i \in C_j : x_i > v\}` for the clusters :math:`C_j` with maximum
+        :math:`> v`, in time order; their mean is the mean cluster size at :math:`v` (clusters kept
+        as formed at :math:`u_0`).
+
+    Examples
+    --------
+    >>> x = np.array([0, 2, 3, 0, 0, 5, 0, 4.0])
+    >>> c = decluster_runs(np.arange(8.0), x, threshold=1, run_length=2)
+    >>> cluster_sizes(np.arange(8.0), x, c, 2.5)
+    array([1, 2])
+    """
+    if level < clusters.threshold:
+        raise ValueError(f"level {level} is below the clustering threshold {clusters.threshold}")
+    t = np.asarray(time_s, dtype=np.float64)
+    above = np.asarray(values, dtype=np.float64) > level
+    owner = np.searchsorted(clusters.start, t[above], side="right") - 1
+    return np.bincount(owner, minlength=clusters.n_clusters)[clusters.peak_value > level]
 
 
 def extremal_index(
