@@ -6,7 +6,7 @@ each timed on 20 resamples and extrapolated to 1000:
 
 * a Python loop of ``scipy.stats.genpareto.fit(y, floc=0)``;
 * R's evd ``fpot`` in an R loop (``Rscript``, timed inside R with ``system.time``, so R's start-up
-  is excluded), when ``Rscript`` and evd are installed;
+  is excluded), when ``Rscript`` and evd are installed (otherwise it says "R not available");
 * pyextremes' bootstrap (``EVA.get_summary(return_period=..., alpha=0.95, n_samples=20)`` on the
   same excesses as an hourly series, declustering off), when pyextremes is importable; its time
   includes the point fit and summary overhead, divided by ``n_samples``.
@@ -17,16 +17,13 @@ on the timed resamples.
 
 from __future__ import annotations
 
-import os
-import shutil
-import subprocess
-import tempfile
 import time
 import warnings
 
 import numpy as np
 from scipy import stats
 
+from _timing import run_r
 from overbound.stats.bootstrap import bootstrap_gpd
 
 N_EXC = 10_000
@@ -50,24 +47,16 @@ def time_scipy(y: np.ndarray, idx: np.ndarray) -> tuple[float, np.ndarray]:
     return (time.perf_counter() - t0) / len(idx) * N_BOOT, xi
 
 
-def time_r(y: np.ndarray, idx: np.ndarray) -> float | None:
-    if shutil.which("Rscript") is None:
-        return None
-    with tempfile.TemporaryDirectory() as d:
-        np.savetxt(os.path.join(d, "y.txt"), y)
-        np.savetxt(os.path.join(d, "idx.txt"), idx + 1, fmt="%d")
-        script = f"""
-suppressMessages(library(evd))
-y <- scan("{d}/y.txt", quiet = TRUE)
-idx <- as.matrix(read.table("{d}/idx.txt"))
-tt <- system.time(for (k in seq_len(nrow(idx))) fpot(y[idx[k, ]], threshold = 0, std.err = FALSE))
-cat(tt[["elapsed"]], "\\n")
+_R_LOOP = """
+idx <- matrix(as.integer(idx), nrow = nrow) + 1L
+tt <- system.time(for (k in seq_len(nrow)) fpot(y[idx[k, ]], threshold = 0, std.err = FALSE))
+cat("seconds", tt[["elapsed"]], "\\n")
 """
-        r = subprocess.run(["Rscript", "-e", script], capture_output=True, text=True, check=False)
-    if r.returncode != 0:
-        print("R evd failed:", r.stderr.strip()[:200])
-        return None
-    return float(r.stdout.split()[-1]) / len(idx) * N_BOOT
+
+
+def time_r(y: np.ndarray, idx: np.ndarray) -> float | None:
+    res = run_r(f"nrow <- {idx.shape[0]}L\n{_R_LOOP}", {"y": y, "idx": idx.T})
+    return None if res is None else res["seconds"] / len(idx) * N_BOOT
 
 
 def time_pyextremes(y: np.ndarray) -> float | None:
@@ -75,6 +64,7 @@ def time_pyextremes(y: np.ndarray) -> float | None:
         import pandas as pd
         from pyextremes import EVA
     except ImportError:
+        print("pyextremes not importable: no pyextremes ratio")
         return None
     series = pd.Series(y + 1.0, index=pd.date_range("2020-01-01", periods=y.size, freq="h"))
     with warnings.catch_warnings():
