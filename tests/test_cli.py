@@ -5,6 +5,7 @@ from __future__ import annotations
 import gzip
 import json
 import math
+import re
 from importlib.resources import files
 from pathlib import Path
 
@@ -14,6 +15,7 @@ from click.testing import CliRunner
 
 from overbound.cli import DEMO_POS, USLO_REFERENCE, main
 from overbound.io.geodesy import Reference, enu_errors_geodetic
+from overbound.methods.tail_extrapolation import EVT_EXTRA_KEYS, EVT_KEYS
 
 POS = Path(str(files("overbound.data") / DEMO_POS))
 
@@ -206,7 +208,7 @@ def test_gh3_confidence_command_and_report_section(tmp_path):
     assert suspect and all(14.0 <= t <= 17.0 for t in suspect)
     assert (tmp_path / "cl" / "confidence.html").exists()
     out = tmp_path / "an"
-    res = CliRunner().invoke(main, ["analyze", str(sim), "-o", str(out), "--service", "LPV"])
+    res = CliRunner().invoke(main, ["analyze", str(sim), "-o", str(out), "--service", "LPV", "--no-evt"])
     assert res.exit_code == 0, res.output
     summary = json.loads((out / "summary.json").read_text())
     assert summary["confidence"]["vertical"]["suspect_targets"] == suspect
@@ -214,5 +216,118 @@ def test_gh3_confidence_command_and_report_section(tmp_path):
     page = (out / "report.html").read_text()
     assert '<section id="confidence-vertical">' in page and '<section id="confidence-horizontal">' in page
     assert json.loads((out / "confidence-vertical.json").read_text())["bins"] == doc["bins"]
-    res = CliRunner().invoke(main, ["analyze", str(sim), "-o", str(tmp_path / "nc"), "--no-confidence"])
+    res = CliRunner().invoke(
+        main, ["analyze", str(sim), "-o", str(tmp_path / "nc"), "--no-confidence", "--no-evt"]
+    )
     assert res.exit_code == 0 and "confidence-vertical" not in (tmp_path / "nc" / "report.html").read_text()
+
+
+# --------------------------------------------------------------------------- EVT (issue 4)
+
+DAY_ONE = ["--end", "2024-01-08T00:00:00"]  # the first day of the simulated campaign: fewer epochs, faster
+EVT_FIGURES = ("acf", "vk", "clusters", "mean-excess", "shape-stability", "p-mi-threshold", "tail-fit", "krs")
+
+
+@pytest.fixture(scope="module")
+def rich_sim(tmp_path_factory):
+    """Two simulated days whose errors are 1.2 times their PL/K: a rich SI tail with a few epochs near 1."""
+    path = tmp_path_factory.mktemp("evt") / "rich.parquet"
+    args = ["simulate", "-o", str(path), "--days", "2", "--seed", "1", "--sigma-ratio", "1.2",
+            "--tail-fraction", "0"]  # fmt: skip
+    assert CliRunner().invoke(main, args).exit_code == 0
+    return path
+
+
+def test_gh4_evt_command_is_reproducible(rich_sim, tmp_path):
+    """`overbound evt`: evt.json with the issue's keys, a self-contained evt.html, the same bytes twice."""
+    outputs = []
+    for name in ("a", "b"):
+        out = tmp_path / name
+        args = ["evt", str(rich_sim), "-o", str(out), "--bootstrap", "100", "--seed", "5",
+                "--service", "LPV-200"]  # fmt: skip
+        res = CliRunner().invoke(main, [*args, *DAY_ONE])
+        assert res.exit_code == 0, res.output
+        outputs.append(res.output)
+        for f in ("evt.json", "evt.html"):
+            assert (out / f).exists()
+    doc = json.loads((tmp_path / "a" / "evt.json").read_text())
+    assert set(doc) == EVT_KEYS | EVT_EXTRA_KEYS
+    assert (doc["seed"], doc["n_boot"], doc["decluster"], doc["service"]) == (5, 100, True, "LPV-200")
+    assert doc["threshold_method"] != "given" and list(doc["services"]) == ["LPV-200"]
+    for f in ("evt.json", "evt.html"):
+        assert (tmp_path / "a" / f).read_bytes() == (tmp_path / "b" / f).read_bytes()
+    assert (
+        f"evt: {tmp_path / 'a' / 'evt.json'}" in outputs[0]
+        and f"report: {tmp_path / 'a' / 'evt.html'}" in outputs[0]
+    )
+    assert "EVT vertical: P_MI" in outputs[0] and "P_MI95" in outputs[0] and "LPV-200" in outputs[0]
+    page = (tmp_path / "a" / "evt.html").read_text()
+    assert not re.search(r"""(?:src|href|action)\s*=\s*(?!["']?(?:data:image/png;base64,|#))""", page)
+    assert re.findall(
+        r'<img src="data:image/png;base64,[^"]+"[^>]*data-figure="evt-vertical-([a-z-]+)"', page
+    ) == list(EVT_FIGURES)
+
+
+def test_gh4_evt_options_reach_the_json(rich_sim, tmp_path):
+    args = ["evt", str(rich_sim), "-o", str(tmp_path), "--no-decluster", "--threshold", "0.6",
+            "--cluster-gap", "30", "--bootstrap", "50", "--confidence", "0.9", "--axis", "horizontal",
+            "--service", "LPV-200", "--end", "2024-01-07T12:00:00"]  # fmt: skip
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0, res.output
+    doc = json.loads((tmp_path / "evt.json").read_text())
+    assert (doc["decluster"], doc["threshold"], doc["threshold_method"]) == (False, 0.6, "given")
+    options = (doc["cluster_gap_s"], doc["n_boot"], doc["confidence"], doc["axis"])
+    assert options == (30.0, 50, 0.9, "horizontal")
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "message"),
+    [
+        ("--threshold", "high", "expected 'auto' or a number"),
+        ("--threshold", "1.5", "finite number below 1"),
+        ("--threshold", "nan", "finite number below 1"),
+        ("--cluster-gap", "-3", "finite number at least 0"),
+    ],
+)
+def test_gh4_evt_bad_option_is_a_usage_error(option, value, message, tmp_path):
+    res = CliRunner().invoke(
+        main, ["evt", str(POS), "--reference", USLO_REFERENCE, "-o", str(tmp_path), option, value]
+    )
+    assert res.exit_code == 2
+    assert f"Invalid value for '{option}'" in res.output and message in res.output
+    assert not (tmp_path / "evt.json").exists()
+
+
+def test_gh4_evt_too_few_tail_values_is_a_clean_error(tmp_path):
+    """The USLO day (2865 epochs at 30 s) has too few tail values: one error line, no traceback."""
+    res = CliRunner().invoke(main, ["evt", str(POS), "--reference", USLO_REFERENCE, "-o", str(tmp_path)])
+    assert res.exit_code == 2
+    assert res.output.startswith("error: ") and "too few tail values" in res.output
+    assert res.output.count("\n") == 1 and "Traceback" not in res.output
+    assert not (tmp_path / "evt.json").exists()
+
+
+def test_gh4_analyze_uslo_says_why_there_is_no_estimate(uslo_run, tmp_path):
+    out, doc, res = uslo_run
+    for axis in ("vertical", "horizontal"):  # the file has HPL: both axes tried
+        brief = doc["evt"][axis]
+        assert brief["p_mi"] is None and brief["services"] == {}
+        assert brief["message"].startswith("no estimate: ") and "too few tail values" in brief["message"]
+        assert not (out / f"evt-{axis}.json").exists()
+    page = (out / "report.html").read_text()
+    assert '<section id="evt-vertical">' in page and "No estimate of P<sub>MI</sub>" in page
+    assert "EVT vertical: no estimate" in res.output
+    # --no-evt: no EVT at all (a two-epoch CSV: quick)
+    csv = tmp_path / "rx.csv"
+    csv.write_text(
+        "time,station,hpe,vpe,hpl,vpl\n2024-01-07T00:00:00,A,1,2,12,18\n2024-01-07T00:00:01,A,1,2,12,18\n"
+    )
+    res = CliRunner().invoke(
+        main, ["analyze", str(csv), "-o", str(tmp_path / "o"), "--no-evt", "--service", "LPV"]
+    )
+    assert res.exit_code == 0, res.output
+    assert json.loads((tmp_path / "o" / "summary.json").read_text())["evt"] == {}
+    assert (
+        not list((tmp_path / "o").glob("evt*"))
+        and "evt-vertical" not in (tmp_path / "o" / "report.html").read_text()
+    )

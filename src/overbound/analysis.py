@@ -5,7 +5,9 @@ from __future__ import annotations
 import datetime as dt
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
+import numpy as np
 import polars as pl
 
 from overbound.io.geodesy import Reference
@@ -13,7 +15,10 @@ from overbound.io.open import Source, read, source_name
 from overbound.io.schema import InputError, ReadReport, validate_epochs
 from overbound.methods.confidence_level import ConfidenceAnalysis, confidence_analysis
 from overbound.methods.counting import CountingResult, count_kpis
-from overbound.services import ServiceLevel, resolve_services
+from overbound.services import SERVICES, ServiceLevel, resolve_services
+
+if TYPE_CHECKING:  # a run-time import would be circular (tail_extrapolation -> report.json -> analysis)
+    from overbound.methods.tail_extrapolation import TailAnalysis
 
 __all__ = ["Analysis", "Verdict", "analyze", "load_epochs", "verdicts"]
 
@@ -30,6 +35,9 @@ class Analysis:
     counting : the counting KPIs.
     title : a label for the report (the inputs' names).
     confidence : the PL confidence-level analyses (Comby et al. 2003), one per axis analysed.
+    evt : the EVT tail extrapolations (Veerman et al., GIMAT), one per axis analysed.
+    evt_failures : ``(axis, reason)`` of each axis whose EVT analysis could not run (e.g. too few
+        tail values): no estimate there, and why.
     """
 
     table: pl.DataFrame
@@ -38,6 +46,8 @@ class Analysis:
     counting: CountingResult
     title: str
     confidence: tuple[ConfidenceAnalysis, ...] = ()
+    evt: tuple[TailAnalysis, ...] = ()
+    evt_failures: tuple[tuple[str, str], ...] = ()
 
     @property
     def n_rejected(self) -> int:
@@ -105,6 +115,9 @@ def analyze(
     columns: Sequence[str] | None = (),
     time_range: tuple[dt.datetime | None, dt.datetime | None] | None = None,
     confidence: Sequence[str] | None = (),
+    evt: Sequence[str] | None = (),
+    evt_n_boot: int = 1000,
+    evt_seed: int = 0,
     progress: Callable[[str], None] | None = None,
 ) -> Analysis:
     """Read ``inputs`` (or take an epoch table) and count the KPIs for each service.
@@ -119,6 +132,13 @@ def analyze(
     :func:`~overbound.methods.confidence_level.confidence_analysis` with its defaults) to
     run: ``()`` none (the default), ``None`` vertical plus horizontal when the table has
     ``east``/``north`` (read them with ``columns``).
+    ``evt`` names the axes of the EVT tail extrapolation (Veerman et al.,
+    :func:`~overbound.methods.tail_extrapolation.tail_analysis`: automatic threshold and cluster
+    gap, ``evt_n_boot`` resamples, seed ``evt_seed``, the HMI of each of ``services`` with an alert
+    limit on the axis): ``()`` none (the default), ``None`` vertical plus horizontal when the table
+    has horizontal solutions. An axis that cannot be analysed (too few tail values, no solution) is
+    listed in ``Analysis.evt_failures`` with the reason instead of failing the analysis. Pass
+    ``"alert"`` in ``columns`` so that alerted epochs are excluded.
     """
     if isinstance(inputs, pl.DataFrame):
         table, reports = validate_epochs(inputs), ()
@@ -143,20 +163,55 @@ def analyze(
     axes = _confidence_axes(table) if confidence is None else tuple(confidence)
     if axes and progress:
         progress("PL confidence level")
-    return Analysis(
-        table,
-        reports,
-        levels,
-        counting,
-        label,
-        tuple(confidence_analysis(table, axis=a) for a in axes),
-    )
+    cl = tuple(confidence_analysis(table, axis=a) for a in axes)
+    evt_axes = _evt_axes(table) if evt is None else tuple(dict.fromkeys(evt))
+    done, failed = _run_evt(table, evt_axes, levels, evt_n_boot, evt_seed, progress)
+    return Analysis(table, reports, levels, counting, label, cl, done, failed)
 
 
 def _confidence_axes(table: pl.DataFrame) -> tuple[str, ...]:
     """Vertical always; horizontal when the table has signed east/north errors."""
     has_en = {"east", "north"} <= set(table.columns) and table["east"].is_not_nan().any()
     return ("vertical", "horizontal") if has_en else ("vertical",)
+
+
+def _evt_axes(table: pl.DataFrame) -> tuple[str, ...]:
+    """Vertical always; horizontal when some epoch has a finite HPE and an HPL > 0."""
+    if table.is_empty():
+        return ("vertical",)
+    hpe, hpl = table["hpe"].to_numpy(), table["hpl"].to_numpy()
+    has_h = bool(np.any(np.isfinite(hpe) & np.isfinite(hpl) & (hpl > 0)))
+    return ("vertical", "horizontal") if has_h else ("vertical",)
+
+
+def _service_spec(s: ServiceLevel) -> str:
+    """The ``--service`` text of a level: its name when built in, ``NAME:HAL:VAL`` otherwise."""
+    if SERVICES.get(s.name) == s:
+        return s.name
+    return f"{s.name}:{s.hal!r}:{'-' if s.val is None else repr(s.val)}"
+
+
+def _run_evt(
+    table: pl.DataFrame,
+    axes: tuple[str, ...],
+    levels: tuple[ServiceLevel, ...],
+    n_boot: int,
+    seed: int,
+    progress: Callable[[str], None] | None,
+) -> tuple[tuple[TailAnalysis, ...], tuple[tuple[str, str], ...]]:
+    """The EVT analysis of each axis; an axis that cannot be analysed gives its reason instead."""
+    from overbound.methods.tail_extrapolation import tail_analysis
+
+    done, failed = [], []
+    for axis in axes:  # one or two axes
+        if progress:
+            progress(f"EVT tail extrapolation, {axis}")
+        specs = tuple(_service_spec(s) for s in levels if s.alert_limit(axis) is not None)
+        try:
+            done.append(tail_analysis(table, axis=axis, n_boot=n_boot, rng=seed, services=specs))
+        except ValueError as exc:  # InputError too: no solution, too few tail values
+            failed.append((axis, str(exc)))
+    return tuple(done), tuple(failed)
 
 
 def _levels(services: Sequence[str] | Sequence[ServiceLevel] | None) -> tuple[ServiceLevel, ...]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import math
 import sys
 import tempfile
 from collections.abc import Iterator
@@ -161,7 +162,14 @@ def _read_options(reference, reference_ecef, fmt, station, strict, start, end, c
     show_default=True,
     help="Add the PL confidence level per PL band (vertical; horizontal too with east/north errors).",
 )
-def analyze(inputs, out_dir, services, epochs_out, confidence, **inputs_opts) -> None:
+@click.option(
+    "--evt/--no-evt",
+    default=True,
+    show_default=True,
+    help="Add the EVT tail extrapolation of P_MI and P_HMI (vertical; horizontal too with HPL): "
+    "OUTPUT/evt-<axis>.json.",
+)
+def analyze(inputs, out_dir, services, epochs_out, confidence, evt, **inputs_opts) -> None:
     """Analyse receiver output INPUTS: write OUTPUT/summary.json and OUTPUT/report.html."""
     paths = _run_analysis(
         list(inputs),
@@ -169,6 +177,7 @@ def analyze(inputs, out_dir, services, epochs_out, confidence, **inputs_opts) ->
         services=services,
         epochs_out=epochs_out,
         confidence=confidence,
+        evt=evt,
         **_read_options(**inputs_opts),
     )
     click.echo(f"report: {paths[1]}")
@@ -176,21 +185,23 @@ def analyze(inputs, out_dir, services, epochs_out, confidence, **inputs_opts) ->
 
 
 def _run_analysis(
-    inputs, out_dir: Path, *, services=(), epochs_out=None, title=None, confidence=True, **read_opts
+    inputs, out_dir: Path, *, services=(), epochs_out=None, title=None, confidence=True, evt=True, **read_opts
 ):
     """Analyse, write summary.json and report.html (and the epoch table); return their paths."""
     from overbound.analysis import analyze as run
     from overbound.io.table import write_epochs
+    from overbound.methods.tail_extrapolation import write_evt
     from overbound.report.confidence import json_name, write_confidence
+    from overbound.report.evt import json_name as evt_json_name
     from overbound.report.html import write_report
     from overbound.report.json import summary_dict, write_summary
 
     if epochs_out:
         columns = None  # the epoch table written keeps every column
     else:
-        columns = ("east", "north", "alert") if confidence else ()
+        columns = (("east", "north") if confidence else ()) + (("alert",) if confidence or evt else ())
     with _progress() as bar:
-        task = bar.add_task("reading", total=len(inputs) + 4)
+        task = bar.add_task("reading", total=len(inputs) + 4 + 2 * evt)
 
         def step(what: str) -> None:
             bar.update(task, description=f"{what}", advance=1)
@@ -202,11 +213,14 @@ def _run_analysis(
             **read_opts,
             columns=columns,
             confidence=None if confidence else (),
+            evt=None if evt else (),
             progress=step,
         )
         out_dir.mkdir(parents=True, exist_ok=True)
         for c in result.confidence:
             write_confidence(c, out_dir / json_name(c.axis))
+        for e in result.evt:
+            write_evt(e, out_dir / evt_json_name(e.axis))
         step("writing summary.json")
         summary = write_summary(result, out_dir / "summary.json")
         step("drawing report.html")
@@ -249,6 +263,22 @@ def _print_summary(result) -> None:
             f"{k.horizontal.stanford.hmi}/{v.hmi if v else '-'}",
         )
     console.print(t)
+    for e in result.evt:
+        console.print(_evt_line(e), highlight=False, soft_wrap=True)
+    for axis, reason in result.evt_failures:
+        console.print(f"EVT {axis}: no estimate: {reason}", highlight=False, soft_wrap=True)
+
+
+def _evt_line(a) -> str:
+    """One line of an EVT result: P_MI, its interval and bounds, and each service's verdict."""
+    t = a.tail
+    verdict = {True: "meets", False: "does not meet", None: "no estimate"}
+    services = ", ".join(f"{n} {verdict[h.meets_requirement]}" for n, h in a.services.items()) or "none"
+    return (
+        f"EVT {a.axis}: P_MI {_fmt(t.p)} per epoch [{_fmt(t.p_ci[0])}, {_fmt(t.p_ci[1])}], "
+        f"P_MI95 {_fmt(t.p_95)}; per approach upper bound {_fmt(t.p_approach_95)}; "
+        f"HMI requirement: {services}"
+    )
 
 
 @main.command()
@@ -440,6 +470,120 @@ def confidence(
         soft_wrap=True,
     )
     click.echo(f"confidence: {path}")
+    click.echo(f"report: {run.report}")
+
+
+def _auto_or_float(*, below: float | None = None, minimum: float | None = None):
+    """A click callback: ``auto`` or a finite number (below ``below``, at least ``minimum``).
+
+    A bad value is a usage error naming the option (exit status 2).
+    """
+
+    def convert(ctx, param, value: str) -> str | float:
+        if value.strip().lower() == "auto":
+            return "auto"
+        try:
+            x = float(value)
+        except ValueError:
+            raise click.BadParameter(f"{value!r}: expected 'auto' or a number") from None
+        if (
+            not math.isfinite(x)
+            or (below is not None and x >= below)
+            or (minimum is not None and x < minimum)
+        ):
+            bounds = f"below {below:g}" if below is not None else f"at least {minimum:g}"
+            raise click.BadParameter(f"{value!r}: expected 'auto' or a finite number {bounds}")
+        return x
+
+    return convert
+
+
+@main.command()
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "-o",
+    "--output",
+    "out_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Output directory for evt.json and evt.html.",
+)
+@click.option(
+    "--axis",
+    type=click.Choice(["vertical", "horizontal"]),
+    default="vertical",
+    show_default=True,
+    help="Safety index to extrapolate: |VPE|/VPL or HPE/HPL.",
+)
+@click.option(
+    "--service",
+    metavar="NAME|NAME:HAL:VAL",
+    help="HMI filtering: drop epochs with PL >= AL and those in the TTA before an alert "
+    "(default: none); the HMI result is then given for this service only.",
+)
+@click.option(
+    "--threshold",
+    default="auto",
+    show_default=True,
+    metavar="auto|VALUE",
+    callback=_auto_or_float(below=1.0),
+    help="Tail threshold of the safety index (below 1), or automatic (Anderson-Darling + ForwardStop).",
+)
+@click.option(
+    "--cluster-gap",
+    default="auto",
+    show_default=True,
+    metavar="auto|SECONDS",
+    callback=_auto_or_float(minimum=0.0),
+    help="Gap K_T between clusters of exceedances (s), or read from the V_K curve.",
+)
+@click.option(
+    "--decluster/--no-decluster",
+    default=True,
+    show_default=True,
+    help="Fit the GPD to cluster maxima, or to all exceedances.",
+)
+@click.option(
+    "--bootstrap",
+    "n_boot",
+    default=1000,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="Bootstrap resamples for the intervals.",
+)
+@click.option(
+    "--confidence",
+    default=0.95,
+    show_default=True,
+    type=click.FloatRange(0, 1, min_open=True, max_open=True),
+    help="Level of the intervals and one-sided upper bounds.",
+)
+@click.option("--seed", default=0, show_default=True, type=int, help="Seed of the bootstrap.")
+@_with_input_options
+def evt(
+    inputs, out_dir, axis, service, threshold, cluster_gap, decluster, n_boot, confidence, seed, **inputs_opts
+) -> None:
+    """P_MI and P_HMI by EVT tail extrapolation (Veerman et al., GIMAT): OUTPUT/evt.json and evt.html."""
+    from overbound.analysis import load_epochs
+    from overbound.report.evt import run_evt
+
+    with _progress() as bar:
+        bar.add_task(f"{axis} EVT tail extrapolation", total=None)
+        table, _ = load_epochs(list(inputs), columns=("alert",), **_read_options(**inputs_opts))
+        run = run_evt(
+            table,
+            out_dir,
+            axis=axis,
+            service=service,
+            threshold=threshold,
+            cluster_gap=cluster_gap,
+            decluster=decluster,
+            n_boot=n_boot,
+            confidence=confidence,
+            seed=seed,
+        )
+    console.print(_evt_line(run.analysis), highlight=False, soft_wrap=True)
+    click.echo(f"evt: {run.json_path}")
     click.echo(f"report: {run.report}")
 
 

@@ -295,3 +295,12 @@ def test_json_keys_and_determinism(sim_table, tmp_path):
     t = a.tail
     assert t.candidates.size == t.mean_excess.size == t.p_vs_threshold.size == t.stability.xi.size > 0
     assert a.dependence.acf[0] == 1.0 and a.dependence.vk_k_s.size == a.dependence.vk_v.size
+
+
+def test_service_without_epochs_gives_no_estimate(sim_table):
+    a = tail_analysis(
+        sim_table, threshold=0.6, services=("TINY:1:1",), **{k: v for k, v in FAST.items() if k != "services"}
+    )
+    h = a.services["TINY"]
+    assert h.counts.n_used == 0 and h.tail is None and h.meets_requirement is None
+    assert "no estimate" in h.message

@@ -1039,6 +1039,9 @@ def _service_hmi(
     counts = _counts(d, n_alert, n_above, n_tta, int(keep.sum()))
     dt_s = counts.interval_s
     exposure = s.integrity_exposure_s
+    if counts.n_used < 3:
+        msg = f"only {counts.n_used} epochs with PL < {al:g} m: no estimate"
+        return ServiceHMI(s, al, counts, None, nan, nan, exposure, nan, nan, s.integrity_risk, None, msg)
     try:
         tail = _tail_fit(
             d.t_us[keep] / 1e6,

@@ -8,7 +8,9 @@ metadata.
 
 Sections (each a ``<section id=...>`` with an ``<h2>``): ``overview``, ``accuracy``,
 ``stations`` (only for several stations), one ``service-<name>`` per service level,
-``time-series``, ``method-notes`` and ``summary-data`` (the ``summary.json`` document, folded).
+one ``confidence-<axis>`` per PL confidence-level axis, one ``evt-<axis>`` per EVT axis (an axis
+that could not be analysed says why), ``time-series``, ``method-notes`` and ``summary-data`` (the
+``summary.json`` document, folded).
 """
 
 from __future__ import annotations
@@ -29,7 +31,9 @@ from overbound.methods.counting import (
     Region,
     ServiceKPI,
 )
+from overbound.methods.tail_extrapolation import TailAnalysis
 from overbound.report.confidence import confidence_section_html
+from overbound.report.evt import analysed_series, evt_failure_html, evt_section_html
 from overbound.report.figures import (
     REGION_COLOURS,
     REGION_LABELS,
@@ -87,6 +91,7 @@ def section_ids(analysis: Analysis) -> tuple[str, ...]:
         *(("stations",) if analysis.counting.by_station else ()),
         *(_service_id(s) for s in analysis.services),
         *(f"confidence-{c.axis}" for c in analysis.confidence),
+        *(f"evt-{axis}" for axis, _ in _evt_items(analysis)),
         "time-series",
         "method-notes",
         "summary-data",
@@ -104,6 +109,7 @@ def render_report(analysis: Analysis, *, summary: dict | None = None) -> str:
         *((_stations(analysis),) if c.by_station else ()),
         *(_service(analysis, s) for s in analysis.services),
         *(confidence_section_html(c) for c in analysis.confidence),
+        *(_evt_section(analysis, axis, item) for axis, item in _evt_items(analysis)),
         _time_series(analysis),
         _method_notes(c),
         _section(
@@ -221,6 +227,7 @@ def _header(a: Analysis) -> str:
             ("accuracy", "Accuracy"),
             *((_service_id(s), s.name) for s in a.services),
             *((f"confidence-{c.axis}", f"{c.axis.capitalize()} PL confidence") for c in a.confidence),
+            *((f"evt-{axis}", f"{axis.capitalize()} EVT") for axis, _ in _evt_items(a)),
             ("time-series", "Time series"),
             ("method-notes", "Method notes"),
             ("summary-data", "Summary data"),
@@ -232,6 +239,18 @@ def _header(a: Analysis) -> str:
         f"{_e(', '.join(s.name for s in a.services))} · all times GPS time</p>"
         f'<nav aria-label="Contents"><ul>{links}</ul></nav></header>'
     )
+
+
+def _evt_items(a: Analysis) -> list[tuple[str, TailAnalysis | str]]:
+    """``(axis, TailAnalysis or the reason it failed)``, vertical first."""
+    items = [(t.axis, t) for t in a.evt] + list(a.evt_failures)
+    return sorted(items, key=lambda item: item[0] != "vertical")
+
+
+def _evt_section(a: Analysis, axis: str, item: TailAnalysis | str) -> str:
+    if isinstance(item, str):
+        return evt_failure_html(axis, item)
+    return evt_section_html(item, series=analysed_series(a.table, item))
 
 
 def _duration(start: str | None, end: str | None) -> str:

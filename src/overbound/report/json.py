@@ -5,7 +5,10 @@ inputs give the same bytes on every run. NaN and infinities become ``null``.
 Schema ``overbound.summary/1``; keys listed in the foundation issue are stable,
 others may be added. ``stations`` holds the same KPIs per station when the input has
 several stations (empty otherwise); ``confidence`` the PL confidence level of each axis
-analysed in brief (bins rated, the suspect bands with a confidence below 1 %, the worst band).
+analysed in brief (bins rated, the suspect bands with a confidence below 1 %, the worst band);
+``evt`` the EVT tail extrapolation of each axis analysed in brief (P_MI, its upper bound, the upper
+bound per approach, each service's verdict and the message; ``null`` numbers and the reason as
+message when the axis could not be analysed); the full documents are ``evt-<axis>.json``.
 """
 
 from __future__ import annotations
@@ -140,6 +143,7 @@ def summary_dict(analysis: Analysis) -> dict:
         "services": services,
         "stations": {name: _station_dict(sc, analysis.services) for name, sc in c.by_station.items()},
         "confidence": {a.axis: _confidence_brief(a) for a in analysis.confidence},
+        "evt": _evt_briefs(analysis),
     }
 
 
@@ -152,6 +156,29 @@ def _confidence_brief(a) -> dict:
         "suspect_targets": [a.bins[i].target for i in a.suspect],
         "worst": None if worst is None else {"target": worst.target, "confidence": worst.confidence},
     }
+
+
+def _evt_briefs(analysis: Analysis) -> dict:
+    """Per axis, the EVT result in a few numbers; the rest is in ``evt-<axis>.json``."""
+    out: dict = {}
+    for a in analysis.evt:
+        t = a.tail
+        out[a.axis] = {
+            "p_mi": t.p if t else None,
+            "p_mi_95": t.p_95 if t else None,
+            "p_mi_per_approach_95": t.p_approach_95 if t else None,
+            "services": {name: {"meets_requirement": h.meets_requirement} for name, h in a.services.items()},
+            "message": a.message,
+        }
+    for axis, reason in analysis.evt_failures:
+        out[axis] = {
+            "p_mi": None,
+            "p_mi_95": None,
+            "p_mi_per_approach_95": None,
+            "services": {},
+            "message": f"no estimate: {reason}",
+        }
+    return out
 
 
 def write_summary(analysis: Analysis, path: str | Path) -> Path:
