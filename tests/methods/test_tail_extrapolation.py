@@ -99,7 +99,7 @@ def test_p_mi_coverage_all_exceedances():
 
 
 def _moving_maximum(n: int, k: int, alpha: float, scale: float, seed: int) -> np.ndarray:
-    """SI_t = scale * max(Z_t..Z_t-k+1), Z iid Pareto(alpha): every large Z makes a cluster of k equal values."""
+    """SI_t = scale * max(Z_t..Z_t-k+1), Z iid Pareto(alpha): a large Z makes a cluster of k equal values."""
     z = np.random.default_rng(seed).pareto(alpha, n + k - 1) + 1.0
     return scale * np.lib.stride_tricks.sliding_window_view(z, k).max(axis=1)
 
@@ -122,7 +122,7 @@ def test_declustered_p_mi_moving_maximum():
 
 
 def test_cluster_size_shrinks_with_the_level():
-    """AR(1) |Gaussian| errors: clusters at SI near 1 are smaller than at the threshold, and P_MI uses them."""
+    """AR(1) |Gaussian| errors: clusters near SI = 1 are smaller than at the threshold; P_MI uses them."""
     sim = simulate(SimulationConfig(days=20, sigma_ratio=1.2, tail_fraction=0.0, seed=3))
     a = tail_analysis(sim.table, **FAST)
     c = a.tail.cluster_size

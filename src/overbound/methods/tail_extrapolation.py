@@ -27,7 +27,7 @@ import polars as pl
 from overbound.io.schema import InputError, as_numpy
 from overbound.report.json import dumps
 from overbound.services import K_H_PA, K_V_PA, SERVICES, ServiceLevel, parse_service
-from overbound.stats.bootstrap import bootstrap_gpd, p_exceed_ci, percentile_ci
+from overbound.stats.bootstrap import bootstrap_gev, bootstrap_gpd, p_exceed_ci, percentile_ci
 from overbound.stats.dependence import (
     Clusters,
     autocorrelation,
@@ -254,7 +254,8 @@ class TailFit:
         larger of the two one-sided upper bounds.
     cluster_rate : rate per epoch of clusters whose maximum exceeds 1 (MI events).
     cluster_size : mean cluster size near 1 (:class:`ClusterSize`).
-    p_approach, p_approach_ci, p_approach_95 : the same per approach (:func:`per_approach`).
+    p_approach, p_approach_ci, p_approach_95 : the same per approach (:func:`per_approach`); the
+        upper bound is again the larger of the bootstrap and profile ones.
     samples, samples_approach : bootstrap values of ``p`` and ``p_approach``.
     message : plain statement of anything special (finite endpoint, non-regular shape...).
     """
@@ -710,7 +711,14 @@ def _tail_fit(
         cluster_size=size,
         p_approach=p_app,
         p_approach_ci=percentile_ci(samples_app, confidence),
-        p_approach_95=float(np.quantile(samples_app, confidence)),
+        p_approach_95=float(
+            np.nanmax(
+                [
+                    np.quantile(samples_app, confidence),
+                    per_approach(p_prof_95, p_prof_95 / size.mean, exposure_n),
+                ]
+            )
+        ),
         samples=samples,
         samples_approach=samples_app,
         message=msgs_s,
@@ -750,18 +758,18 @@ def _gev(d_day: np.ndarray, x: np.ndarray, theta: float, n_boot: int, confidence
         return -np.log1p(-np.minimum(pb, 1.0 - 1e-16)) / (nb * th)
 
     pb = float(fit.sf(1.0))
-    if bm.size < GEV_MIN_BOOT_BLOCKS:
-        n_boot = 0
-    g = _rng(rng)
-    vals = np.empty(n_boot)
+    if bm.size < GEV_MIN_BOOT_BLOCKS or n_boot == 0:
+        msg = f"{bm.size} blocks: too few for a bootstrap (no upper bound)" if n_boot else fit.message
+        return GEVResult(fit, bm, nb, pb, float(per_epoch(pb)), math.nan, 0, msg)
     with warnings.catch_warnings(), np.errstate(all="ignore"):
         warnings.simplefilter("ignore", RuntimeWarning)
-        for b in range(n_boot):  # a loop over resamples of a few dozen block maxima
-            r = bm[g.integers(0, bm.size, bm.size)]
-            fb = _try_gev(r) if np.ptp(r) > 0 else None
-            vals[b] = float(fb.sf(1.0)) if fb is not None else float(np.mean(r > 1.0))
-    p95 = float(np.nanquantile(per_epoch(vals), confidence)) if n_boot else math.nan
-    msg = fit.message if n_boot else f"{bm.size} blocks: too few for a bootstrap (no upper bound)"
+        bs = bootstrap_gev(bm, n_boot=n_boot, rng=_rng(rng), start=fit)
+    p95 = float(np.nanquantile(per_epoch(bs.sf(1.0)), confidence)) if bs.n_failed < n_boot else math.nan
+    msg = fit.message + (
+        f"; {bs.n_failed} of {n_boot} resamples without a maximum-likelihood fit, left out"
+        if bs.n_failed
+        else ""
+    )
     return GEVResult(fit, bm, nb, pb, float(per_epoch(pb)), p95, n_boot, msg)
 
 
@@ -782,7 +790,7 @@ def tail_analysis(
     rng: np.random.Generator | int | None = 0,
     services: tuple[str, ...] | None = None,
     n_sim: int = 200,
-    gev_boot: int = 100,
+    gev_boot: int | None = None,
     diagnostics: bool = True,
 ) -> TailAnalysis:
     r"""Misleading-information probability by EVT tail extrapolation (Veerman et al., sections 2-3).
@@ -814,7 +822,7 @@ def tail_analysis(
     n_sim
         Parametric-bootstrap samples per candidate of the automatic threshold.
     gev_boot
-        Bootstrap resamples of the GEV (each a Nelder-Mead fit; fewer than ``n_boot`` for speed).
+        Bootstrap resamples of the GEV (default ``n_boot``; all fitted at once, :func:`bootstrap_gev`).
     diagnostics
         Compute the per-candidate arrays (mean excess, shape stability, P_MI against threshold) for
         the figures; ``False`` skips them (coverage runs).
@@ -962,7 +970,7 @@ def tail_analysis(
     )
     clock["tail"] = time.perf_counter() - t1
     t1 = time.perf_counter()
-    gev = _gev(day, si, tail.extremal_index, gev_boot, confidence, g_gev)
+    gev = _gev(day, si, tail.extremal_index, n_boot if gev_boot is None else gev_boot, confidence, g_gev)
     clock["gev"] = time.perf_counter() - t1
     # overbounding of the normalised error, down-sampled to independent samples
     t1 = time.perf_counter()

@@ -78,6 +78,26 @@ def _psi(y: np.ndarray) -> np.ndarray:
     return np.where(small, series, direct)
 
 
+def _chi(w: np.ndarray) -> np.ndarray:
+    """``(2 log1p(w) - 2w/(1+w) - w**2/(1+w)**2) / w**3``, 2/3 at 0 (series for ``|w| < 1e-2``).
+
+    With ``t = log1p(xi z)/xi`` it gives :math:`\\partial^2 t/\\partial\\xi^2 = z^3\\chi(\\xi z)`, the
+    companion of :func:`_psi` (:math:`\\partial t/\\partial\\xi = z^2\\psi(\\xi z)`).
+    """
+    w = np.asarray(w, dtype=float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = w / (1.0 + w)
+        out = (2.0 * np.log1p(w) - 2.0 * r - r * r) / (w * w * w)
+    small = np.flatnonzero(np.abs(w) < 1e-2)
+    if small.size:
+        ws = w.flat[small]
+        series = np.zeros_like(ws)
+        for j in range(10, -1, -1):  # sum_j (-1)^j (j+1)(j+2)/(j+3) w^j, Horner
+            series = series * ws + (-1.0) ** j * (j + 1) * (j + 2) / (j + 3)
+        out.flat[small] = series
+    return out
+
+
 # --------------------------------------------------------------------------------------------------
 # GPD: distribution functions
 
@@ -688,6 +708,305 @@ def fit_gev(block_maxima: np.ndarray) -> GEVFit:
     if success and xi <= -1.0:
         success, message = False, "shape <= -1: likelihood unbounded"
     return GEVFit(xi=xi, loc=loc, scale=scale, n=n, loglik=ll, success=success, message=message)
+
+
+# --------------------------------------------------------------------------------------------------
+# GEV: maximum likelihood for many samples at once (the bootstrap's solver)
+
+# Damped Newton of _gev_mle_rows, in the coordinates of the data standardised by the start point:
+# stop once a Newton step is below _GEV_XTOL in every coordinate (xi, mu / scale0, log sigma); the step
+# is then taken, leaving an error near its square.
+_GEV_XTOL = 1e-8
+_GEV_MAXIT = 60
+_GEV_MAXHALF = 40  # backtracking halvings per iteration
+_GEV_ARMIJO = 1e-4
+_GEV_MAXSTEP = 1.0  # longest step in any coordinate (standardised units)
+_EULER_GAMMA = 0.5772156649015329
+
+
+def _rowdot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row sums of ``a * b`` without the temporary product."""
+    return np.einsum("ij,ij->i", a, b)
+
+
+def _gev_loglik_rows(x: np.ndarray, th: np.ndarray) -> np.ndarray:
+    """GEV log-likelihood of each row of ``x`` (B, n) at its row of ``th`` = (xi, mu, log sigma), or -inf."""
+    xi, mu, lam = th[:, 0:1], th[:, 1:2], th[:, 2:3]
+    z = (x - mu) * np.exp(-lam)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        t = z * _log1prel(xi * z)
+        # off the support log1p gives NaN (or -inf at the boundary), so the sum is not finite there
+        ll = -x.shape[1] * th[:, 2] - np.sum((1.0 + xi) * t + np.exp(-t), axis=1)
+    return np.where(np.isfinite(ll), ll, -np.inf)
+
+
+def _psi_chi(w: np.ndarray, r: np.ndarray, log1p_w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_psi` and :func:`_chi` of ``w`` from ``r = w/(1+w)`` and ``log1p(w)`` already at hand."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        iw2 = 1.0 / (w * w)
+        psi = (r - log1p_w) * iw2
+        chi = (2.0 * (log1p_w - r) - r * r) * iw2 / w
+    small = np.flatnonzero(np.abs(w) < 1e-2)
+    if small.size:
+        ws = w.flat[small]
+        psi.flat[small] = _psi(ws)
+        chi.flat[small] = _chi(ws)
+    return psi, chi
+
+
+def _gev_derivs_rows(x: np.ndarray, th: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    r"""Log-likelihood, gradient (B, 3) and Hessian (B, 3, 3) in :math:`(\xi, \mu, \lambda = \log\sigma)`.
+
+    Per observation :math:`\ell = -\lambda - (1+\xi)t - e^{-t}` with :math:`t = \log(1+\xi z)/\xi`,
+    :math:`z = (x-\mu)e^{-\lambda}`, so with :math:`A = e^{-t} - 1 - \xi`
+
+    .. math:: \partial_i \ell = -\delta_{i\lambda} - \delta_{i\xi} t + A\,t_i, \qquad
+              \partial_{ij}\ell = -e^{-t} t_i t_j - \delta_{i\xi} t_j - \delta_{j\xi} t_i + A\,t_{ij},
+
+    where, with :math:`u = 1 + \xi z`: :math:`t_\xi = z^2\psi(\xi z)`, :math:`t_\mu = -1/(\sigma u)`,
+    :math:`t_\lambda = -z/u`, :math:`t_{\xi\xi} = z^3\chi(\xi z)`, :math:`t_{\xi\mu} = z/(\sigma u^2)`,
+    :math:`t_{\xi\lambda} = z^2/u^2`, :math:`t_{\mu\mu} = -\xi/(\sigma u)^2`,
+    :math:`t_{\mu\lambda} = 1/(\sigma u^2)`, :math:`t_{\lambda\lambda} = z/u^2`. The kernels
+    :func:`_psi` and :func:`_chi` are series-stabilised at :math:`\xi z \to 0`, so the Gumbel limit
+    :math:`\xi = 0` is an ordinary point. Rows off the support get ``-inf`` (derivatives meaningless).
+    """
+    n = x.shape[1]
+    xi, mu = th[:, 0:1], th[:, 1:2]
+    isig = np.exp(-th[:, 2])
+    z = (x - mu) * isig[:, None]
+    w = xi * z
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        iu = 1.0 / (1.0 + w)
+        lw = np.log1p(w)
+        t = np.divide(z * lw, w, out=z.copy(), where=w != 0.0)  # z log1p(w)/w, = z at w = 0
+        e = np.exp(-t)
+        a = e - 1.0 - xi
+        psi, chi = _psi_chi(w, w * iu, lw)
+        v = z * iu  # -t_lambda
+        tx = z * z * psi  # t_xi
+        ex, av, ev = e * tx, a * v, e * v
+        s_t, s_tx, s_iu, s_v = (np.sum(q, axis=1) for q in (t, tx, iu, v))
+        ll = -n * th[:, 2] - np.sum((1.0 + xi) * t + e, axis=1)
+        g = np.stack([_rowdot(a, tx) - s_t, -isig * _rowdot(a, iu), -_rowdot(a, v) - n], axis=1)
+        h = np.empty((x.shape[0], 3, 3))
+        h[:, 0, 0] = _rowdot(a, z * z * z * chi) - _rowdot(ex, tx) - 2.0 * s_tx
+        h[:, 0, 1] = h[:, 1, 0] = isig * (_rowdot(ex, iu) + _rowdot(av, iu) + s_iu)
+        h[:, 0, 2] = h[:, 2, 0] = _rowdot(ex, v) + _rowdot(av, v) + s_v
+        h[:, 1, 1] = -isig * isig * (_rowdot(e + a * xi, iu * iu))
+        h[:, 1, 2] = h[:, 2, 1] = isig * (_rowdot(a, iu * iu) - _rowdot(ev, iu))
+        h[:, 2, 2] = _rowdot(av, iu) - _rowdot(ev, v)
+    return np.where(np.isfinite(ll), ll, -np.inf), g, h
+
+
+def _newton_dir(g: np.ndarray, h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Newton step ``-h^{-1} g`` per row by an explicit 3x3 Cholesky of ``-h``; ``ok`` where ``-h`` is PD."""
+    a = -h
+    with np.errstate(invalid="ignore", divide="ignore"):
+        l00 = np.sqrt(a[:, 0, 0])
+        l10, l20 = a[:, 1, 0] / l00, a[:, 2, 0] / l00
+        r11 = a[:, 1, 1] - l10 * l10
+        l11 = np.sqrt(r11)
+        l21 = (a[:, 2, 1] - l20 * l10) / l11
+        r22 = a[:, 2, 2] - l20 * l20 - l21 * l21
+        l22 = np.sqrt(r22)
+        y0 = g[:, 0] / l00  # solve L y = g, then L^T d = y
+        y1 = (g[:, 1] - l10 * y0) / l11
+        y2 = (g[:, 2] - l20 * y0 - l21 * y1) / l22
+        d2 = y2 / l22
+        d1 = (y1 - l21 * d2) / l11
+        d0 = (y0 - l10 * d1 - l20 * d2) / l00
+    d = np.stack([d0, d1, d2], axis=1)
+    ok = (a[:, 0, 0] > 0) & (r11 > 0) & (r22 > 0) & np.all(np.isfinite(d), axis=1)
+    return d, ok
+
+
+def _gev_gumbel_start(y: np.ndarray) -> np.ndarray:
+    """Gumbel moment estimate (xi, mu, log sigma) of each row: its support is the whole line."""
+    sd = math.sqrt(6.0) / math.pi * np.std(y, axis=1)
+    return np.stack([np.zeros(sd.size), np.mean(y, axis=1) - _EULER_GAMMA * sd, np.log(sd)], axis=1)
+
+
+def _gev_pwm_start_rows(y: np.ndarray) -> np.ndarray:
+    """Probability-weighted-moment estimate of each row as in :func:`_gev_pwm_start`, (xi, mu, log sigma)."""
+    ys = np.sort(y, axis=1)
+    n = y.shape[1]
+    j = np.arange(n)
+    b0 = ys.mean(axis=1)
+    b1 = ys @ j / (n * (n - 1))
+    b2 = ys @ (j * (j - 1)) / (n * (n - 1) * (n - 2))
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        c = (2 * b1 - b0) / (3 * b2 - b0) - math.log(2) / math.log(3)
+        k = 7.8590 * c + 2.9554 * c * c  # Hosking's k = -xi
+        g = special.gamma(1 + k)
+        scale = (2 * b1 - b0) * k / (g * (1 - 2.0**-k))
+        loc = b0 + scale * (g - 1) / k
+        th = np.stack([-k, loc, np.log(scale)], axis=1)
+    ok = (np.abs(k) >= 1e-6) & (k > -1.0) & np.all(np.isfinite(th), axis=1)
+    return np.where(ok[:, None], th, _gev_gumbel_start(y))
+
+
+def _ascent_dir(g: np.ndarray, h: np.ndarray, n: int) -> np.ndarray:
+    """Gradient step where the Hessian is not negative definite: the maximiser of the quadratic model
+    along ``g`` where it curves down along ``g`` (Cauchy step), else ``g / n``."""
+    curv = -np.einsum("bi,bij,bj->b", g, h, g)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        step = np.where(curv > 0.0, np.sum(g * g, axis=1) / curv, 1.0 / n)
+    return g * step[:, None]
+
+
+def _gev_newton(y: np.ndarray, th: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Damped Newton of :func:`_gev_mle_rows` on the rows of ``y`` from ``th``; ``(th, ll, status)``.
+
+    Status 0 converged, 2 crossed xi <= -1, 3 iteration cap or failed line search. Rows whose start is
+    off the support start from their Gumbel moments.
+    """
+    b, n = y.shape
+    th = th.copy()
+    ll = _gev_loglik_rows(y, th)
+    off = ~np.isfinite(ll)
+    if np.any(off):
+        th[off] = _gev_gumbel_start(y[off])
+    status = np.full(b, 3)
+    active = np.arange(b)
+    ll, grad, hess = _gev_derivs_rows(y, th)
+    for _ in range(_GEV_MAXIT):
+        if active.size == 0:
+            break
+        d, nd = _newton_dir(grad[active], hess[active])
+        done = nd & (np.max(np.abs(d), axis=1) <= _GEV_XTOL)
+        th[active[done]] += d[done]
+        status[active[done]] = 0
+        active, d, nd = active[~done], d[~done], nd[~done]
+        d = np.where(nd[:, None], d, _ascent_dir(grad[active], hess[active], n))
+        d *= np.minimum(1.0, _GEV_MAXSTEP / np.max(np.abs(d), axis=1))[:, None]
+        moved = _line_search(y, th, ll, active, d, np.sum(d * grad[active], axis=1))
+        active = active[moved]
+        crossed = th[active, 0] <= -1.0
+        status[active[crossed]] = 2
+        active = active[~crossed]
+        if active.size:
+            ll[active], grad[active], hess[active] = _gev_derivs_rows(y[active], th[active])
+    conv = status == 0
+    ll[conv] = _gev_loglik_rows(y[conv], th[conv])
+    status[conv & ~np.isfinite(ll)] = 3
+    return th, ll, status
+
+
+def _gev_mle_rows(
+    x: np.ndarray, start: tuple[float, float, float]
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    r"""GEV maximum-likelihood fit of each row of ``x`` (B, n) at once, by damped Newton.
+
+    Parameters
+    ----------
+    x
+        Samples of block maxima, one per row (n >= 3).
+    start
+        ``(xi, loc, scale)`` to start every row from (in the bootstrap: the full-sample MLE).
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        ``(xi, loc, scale, loglik, status)``; status 0 = converged to a local maximum, 1 = degenerate
+        row (all values equal), 2 = no interior maximum found: the likelihood rose across
+        :math:`\xi = -1` (it is unbounded for :math:`\xi < -1`) or stayed below its limit at
+        :math:`\xi = -1`, 3 = no convergence (iteration cap or failed line search). Parameters and
+        log-likelihood are those of the last iterate; they are an MLE only where status is 0.
+
+    Notes
+    -----
+    Maximises the GEV log-likelihood (Coles 2001, eq. 3.7; Veerman et al., section 2)
+
+    .. math:: \ell(\xi, \mu, \sigma) = -n\log\sigma - (1 + 1/\xi)\sum_i \log(1 + \xi z_i)
+              - \sum_i (1 + \xi z_i)^{-1/\xi}, \qquad z_i = (x_i - \mu)/\sigma,
+
+    subject to :math:`1 + \xi z_i > 0` for every value of the row, written with
+    :math:`t_i = \log(1+\xi z_i)/\xi` (``log1p``, exact at :math:`\xi = 0`: the Gumbel limit
+    :math:`-n\log\sigma - \sum z_i - \sum e^{-z_i}` is reached smoothly, as in :func:`fit_gev`).
+
+    1. Standardise the rows by the start's location and scale, so the parameters
+       :math:`(\xi, \mu, \lambda = \log\sigma)` are all of order one; rows whose values are not all
+       inside the start's support start from their Gumbel moment estimate instead.
+    2. Per row: the analytic gradient and Hessian (:func:`_gev_derivs_rows`); a Newton step where the
+       Hessian is negative definite (3x3 Cholesky), else a step along the gradient :math:`g` (to the
+       maximum of the quadratic model along :math:`g` if it curves down there, else :math:`g/n`);
+       each step is capped at 1 in every coordinate.
+    3. Backtracking line search per row (halving, Armijo condition, with a rounding allowance):
+       points off the support have log-likelihood :math:`-\infty` and are rejected.
+    4. Converged when the Hessian is negative definite and the Newton step is below ``_GEV_XTOL`` in
+       every coordinate (that last step is taken). Rows whose iterate crosses :math:`\xi \le -1`
+       stop there; the rest stop at ``_GEV_MAXIT`` iterations.
+    5. Rows that did not converge are restarted from their own probability-weighted-moment estimate,
+       then from their Gumbel moments (the two starts of :func:`fit_gev`). Those still failing get
+       status 2 if their likelihood is below its limit at :math:`\xi = -1` (the reversed
+       exponential :math:`\sigma^{-1}e^{-(b - x)/\sigma}`, :math:`b = x_{(n)}`,
+       :math:`\sigma = \overline{b - x}`: log-likelihood :math:`-n\log\sigma - n`), else 3.
+
+    A converged row is a local maximum with :math:`\xi > -1`; as in :func:`fit_gev` it is kept even
+    where the :math:`\xi = -1` limit is higher (unlike :func:`fit_gpd`).
+
+    References
+    ----------
+    .. [1] Coles, S. (2001), "An Introduction to Statistical Modeling of Extreme Values", Springer,
+       section 3.3.2, eq. (3.7).
+    .. [2] Nocedal, J. and Wright, S. J. (2006), "Numerical Optimization", 2nd ed., Springer,
+       sections 3.1 (backtracking) and 3.4 (Newton with Hessian modification).
+    """
+    x = np.asarray(x, dtype=float)
+    b, n = x.shape
+    xi0, loc0, scale0 = (float(v) for v in start)
+    if not (math.isfinite(xi0) and xi0 > -1.0 and math.isfinite(loc0) and scale0 > 0):
+        scale0 = math.sqrt(6.0) / math.pi * float(np.std(x)) or 1.0  # Gumbel moments of all rows
+        xi0, loc0 = 0.0, float(np.mean(x)) - _EULER_GAMMA * scale0
+    y = (x - loc0) / scale0
+    th = np.tile([xi0, 0.0, 0.0], (b, 1))
+    ll = np.full(b, -np.inf)
+    status = np.ones(b, dtype=int)
+    rows = np.flatnonzero(np.ptp(y, axis=1) > 0.0)
+    for k, make_start in enumerate((None, _gev_pwm_start_rows, _gev_gumbel_start)):
+        if rows.size == 0:
+            break
+        th0 = th[rows] if make_start is None else make_start(y[rows])
+        th_r, ll_r, st_r = _gev_newton(y[rows], th0)
+        keep = (st_r == 0) | (k == 0)  # a restart replaces a failed row only where it converges
+        th[rows[keep]], ll[rows[keep]], status[rows[keep]] = th_r[keep], ll_r[keep], st_r[keep]
+        rows = rows[status[rows] != 0]
+    if rows.size:
+        ll[rows] = _gev_loglik_rows(y[rows], th[rows])
+        ymax = np.max(y[rows], axis=1, keepdims=True)
+        with np.errstate(divide="ignore"):
+            ll_edge = -n * np.log(np.mean(ymax - y[rows], axis=1)) - n
+        status[rows] = np.where((th[rows, 0] <= -1.0) | ~(ll[rows] >= ll_edge), 2, 3)
+    scale = scale0 * np.exp(th[:, 2])
+    return th[:, 0], loc0 + scale0 * th[:, 1], scale, ll - n * math.log(scale0), status
+
+
+def _line_search(
+    y: np.ndarray, th: np.ndarray, ll: np.ndarray, rows: np.ndarray, d: np.ndarray, slope: np.ndarray
+) -> np.ndarray:
+    """Backtracking along ``d`` for ``rows``; updates ``th`` and ``ll`` in place, returns which rows moved.
+
+    Accepts the first step :math:`\\alpha \\in \\{1, 1/2, \\ldots\\}` with
+    :math:`\\ell(\\theta + \\alpha d) \\ge \\ell(\\theta) + c\\,\\alpha\\,g^\\top d - \\epsilon`, where
+    :math:`\\epsilon` allows for rounding in the sum of ``n`` terms (a step this small is only taken
+    next to the maximum, where the Newton decrement sits at rounding level).
+    """
+    moved = np.zeros(rows.size, dtype=bool)
+    alpha = np.ones(rows.size)
+    pending = np.arange(rows.size)
+    for _ in range(_GEV_MAXHALF):
+        if pending.size == 0:
+            break
+        r = rows[pending]
+        trial = th[r] + alpha[pending, None] * d[pending]
+        ll_t = _gev_loglik_rows(y[r], trial)
+        slack = 1e-13 * (y.shape[1] + np.abs(ll[r]))
+        ok = np.isfinite(ll_t) & (ll_t >= ll[r] + _GEV_ARMIJO * alpha[pending] * slope[pending] - slack)
+        th[r[ok]], ll[r[ok]] = trial[ok], ll_t[ok]
+        moved[pending[ok]] = True
+        pending = pending[~ok]
+        alpha[pending] *= 0.5
+    return moved
 
 
 # --------------------------------------------------------------------------------------------------
