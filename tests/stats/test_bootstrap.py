@@ -190,3 +190,21 @@ def test_profile_ci_exceedance_finite_endpoint_gives_zero_lower():
     # brute force: some tiny p > 0 lies inside the cut at 2.3, consistent with a lower end of 0
     blo, _, _ = _brute_profile_ci(y, 2.3, 0.95)
     assert blo < 1e-6
+
+
+def test_bootstrap_gpd_paired_sums_follow_the_resamples():
+    """Paired values are summed over the same draws as the fit, and do not change the fits."""
+    rng = np.random.default_rng(4)
+    y = rng.exponential(1.0, 300)
+    ones = np.ones(y.size)
+    big = (y > 2.0).astype(float)
+    a = bootstrap_gpd(y, n_boot=50, rng=9)
+    b = bootstrap_gpd(y, n_boot=50, rng=9, paired=np.vstack([ones, big, y]))
+    np.testing.assert_array_equal(a.xi, b.xi)
+    assert a.paired_sums.shape == (50, 0) and b.paired_sums.shape == (50, 3)
+    np.testing.assert_array_equal(b.paired_sums[:, 0], y.size)  # every resample draws n excesses
+    assert np.all(b.paired_sums[:, 1] <= y.size) and b.paired_sums[:, 1].std() > 0
+    # the mean excess of a resample (sum y / n) and its GPD scale move together
+    assert np.corrcoef(b.paired_sums[:, 2], b.sigma)[0, 1] > 0.5
+    with pytest.raises(ValueError, match="columns"):
+        bootstrap_gpd(y, n_boot=5, rng=1, paired=np.ones((2, 10)))

@@ -667,7 +667,13 @@ def _tail_fit(
     g_size, g_rate = g_rate.spawn(2)
     size_star = size.bootstrap(n_boot, g_size)
     if decluster:
-        boot = bootstrap_gpd(y, n_boot=n_boot, rng=g_boot)
+        # the clusters are resampled once for both the GPD and the size near 1 (they covary)
+        top = clusters.peak_value[above] > size.level
+        own = np.zeros(top.size)
+        own[top] = cluster_sizes(t_s, x, clusters, size.level)  # level >= u: all of them are above u
+        boot = bootstrap_gpd(y, n_boot=n_boot, rng=g_boot, paired=np.vstack([own, top]))
+        n_top = boot.paired_sums[:, 1]
+        size_star = np.where(n_top > 0, boot.paired_sums[:, 0] / np.maximum(n_top, 1), size.mean)
         k_star = g_rate.poisson(n_c, size=n_boot)
         gb = gpd_sf(1.0 - u, xi=boot.xi, sigma=boot.sigma)
         samples = k_star / n * gb * size_star

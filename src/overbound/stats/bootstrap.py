@@ -77,6 +77,8 @@ class GPDBootstrap:
         Resamples whose Newton iteration did not converge and were refitted by the grid-scan core.
     success : numpy.ndarray
         Per resample: an interior maximum was found (False where the likelihood is unbounded, xi <= -1).
+    paired_sums : numpy.ndarray
+        ``(n_boot, k)`` sums of the ``paired`` values over each resample (``k = 0`` without them).
     """
 
     xi: np.ndarray = field(repr=False)
@@ -88,6 +90,7 @@ class GPDBootstrap:
     mean_block: float
     n_fallback: int
     success: np.ndarray = field(repr=False)
+    paired_sums: np.ndarray = field(default_factory=lambda: np.empty((0, 0)), repr=False)
 
     def xi_ci(self, level: float = 0.95) -> tuple[float, float]:
         """Percentile interval of the shape."""
@@ -230,6 +233,7 @@ def bootstrap_gpd(
     mean_block: float | None = None,
     times: np.ndarray | None = None,
     workers: int | None = None,
+    paired: np.ndarray | None = None,
 ) -> GPDBootstrap:
     r"""Bootstrap distribution of the GPD maximum-likelihood estimate.
 
@@ -248,6 +252,10 @@ def bootstrap_gpd(
         Mean block length (in excesses) of the stationary bootstrap; default :math:`n^{1/3}`.
     times
         Times of the excesses; only their order is used (the stationary bootstrap needs time order).
+    paired
+        Optional ``(k, n)`` values attached to the excesses (e.g. the size of each cluster); each
+        resample also returns their sums over the drawn excesses (``paired_sums``), so that a statistic
+        of them is resampled jointly with the fit.
     workers
         Threads over chunks of resamples (default: all cores). Each chunk draws from its own child
         generator (``rng.spawn``), so the numbers do not depend on ``workers``.
@@ -294,6 +302,9 @@ def bootstrap_gpd(
     else:
         mb = float(mean_block) if mean_block is not None else max(1.0, n ** (1.0 / 3.0))
     tau0 = fit.xi / fit.sigma if fit.success else 0.0
+    pv = np.empty((0, n)) if paired is None else np.atleast_2d(np.asarray(paired, dtype=np.float64))
+    if pv.shape[1] != n:
+        raise ValueError(f"paired must have {n} columns (one per excess), got shape {pv.shape}")
     chunk = max(1, _CHUNK_ELEMS // n)
     sizes = [min(chunk, n_boot - s) for s in range(0, n_boot, chunk)]
     children = g.spawn(len(sizes))  # one stream per chunk: results do not depend on the threads
@@ -303,7 +314,9 @@ def bootstrap_gpd(
             idx = children[k].integers(0, n, size=(sizes[k], n), dtype=np.int32)
         else:
             idx = stationary_indices(n, n_boot=sizes[k], mean_block=mb, rng=children[k])
-        return _fit_chunk(y[idx], tau0)
+        xi, sig, ok, nfb = _fit_chunk(y[idx], tau0)
+        sums = np.stack([v[idx].sum(axis=1) for v in pv], axis=1) if pv.size else np.empty((idx.shape[0], 0))
+        return xi, sig, ok, nfb, sums
 
     nw = min(len(sizes), workers if workers is not None else (os.cpu_count() or 1))
     if nw > 1:
@@ -321,6 +334,7 @@ def bootstrap_gpd(
         mean_block=mb,
         n_fallback=sum(p[3] for p in parts),
         success=np.concatenate([p[2] for p in parts]),
+        paired_sums=np.concatenate([p[4] for p in parts]),
     )
 
 
