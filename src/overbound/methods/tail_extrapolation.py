@@ -895,8 +895,11 @@ def tail_analysis(
        (clusters) independent and stationary over the campaign, as in section 3.2.
     7. **Confidence** (section 3.7). Declustered: the GPD is bootstrapped on the cluster maxima (iid:
        clusters are the independent units), the number of clusters as
-       :math:`K^* \sim \mathrm{Poisson}(n_c)`, the size :math:`\hat s` by resampling the clusters
-       above :math:`v^*`; all exceedances: stationary bootstrap of the excesses (mean block = mean
+       :math:`K^* \sim \mathrm{Poisson}(n_c)`; the same draws of clusters give the GPD refit and the
+       size :math:`\hat s^*` (mean size at :math:`v^*` of the drawn clusters above :math:`v^*`), so
+       that their covariance enters the interval (a campaign whose clusters reach higher also has
+       longer ones near 1: resampling them separately gave 0.86 coverage on 100 simulated 30-day
+       campaigns, jointly 0.91); all exceedances: stationary bootstrap of the excesses (mean block = mean
        cluster size) and of the exceedance series (mean block :math:`\max(N^{1/3}, 2K_T/\Delta t)`).
        Profile-likelihood intervals of the shape and of :math:`\bar G(1-u)` (scaled like the
        estimate). *Choice:* ``p_ci`` is the union of the bootstrap percentile and the profile
