@@ -63,6 +63,7 @@ __all__ = [
     "ServiceHMI",
     "TailAnalysis",
     "TailFit",
+    "analysed_series",
     "evt_dict",
     "per_approach",
     "tail_analysis",
@@ -495,6 +496,20 @@ def _prepare(table: pl.DataFrame, axis: str) -> _Prepared:
     day = t // _DAY_US
     day_id = np.concatenate([[0], np.cumsum((np.diff(day) != 0) | (np.diff(codes) != 0))])
     return _Prepared(pooled, day_id, pe, pls, alert, table.height, int(table.height - t.size), first.size, dt)
+
+
+def analysed_series(
+    table: pl.DataFrame, *, axis: str = "vertical", service: str | ServiceLevel | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Times (s, on the pooled axis of several stations) and SI of the epochs :func:`tail_analysis` analyses.
+
+    Its Notes step 1: solution epochs, alerts excluded, with ``service`` the PL >= AL and TTA filter.
+    """
+    svc = parse_service(service) if isinstance(service, str) else service
+    d = _prepare(table, axis)
+    al = svc.alert_limit(axis) if svc is not None else None
+    keep = _hmi_keep(d, al, svc.tta_s if svc is not None else 0.0)[0]
+    return d.t_us[keep] / 1e6, d.pe[keep] / d.pl[keep]
 
 
 def _hmi_keep(d: _Prepared, alert_limit: float | None, tta_s: float) -> tuple[np.ndarray, int, int, int]:

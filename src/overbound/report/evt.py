@@ -25,7 +25,6 @@ import polars as pl
 from matplotlib.axes import Axes
 
 from overbound import __version__
-from overbound.io.schema import as_numpy
 from overbound.methods.tail_extrapolation import (
     APPROACH_S,
     TailAnalysis,
@@ -33,6 +32,7 @@ from overbound.methods.tail_extrapolation import (
     tail_analysis,
     write_evt,
 )
+from overbound.methods.tail_extrapolation import analysed_series as tail_series
 from overbound.report.evt_figures import (
     plot_acf,
     plot_clusters,
@@ -44,8 +44,7 @@ from overbound.report.evt_figures import (
     plot_vk,
 )
 from overbound.report.figures import style
-from overbound.report.page import PAGE_CSS, escape, figure_html
-from overbound.services import parse_service
+from overbound.report.page import PAGE_CSS, escape, figure_html, scientific
 from overbound.stats.dependence import VKCurve
 
 __all__ = [
@@ -66,8 +65,6 @@ JSON_NAME = "evt.json"
 REPORT_NAME = "evt.html"
 _AXIS = {"vertical": "Vertical", "horizontal": "Horizontal"}
 _SI = {"vertical": "|VPE|/VPL", "horizontal": "HPE/HPL"}
-_PE_PL = {"vertical": ("vpe", "vpl"), "horizontal": ("hpe", "hpl")}
-_DAY_US = 86_400_000_000
 #: Badge class and text of a service's verdict (``meets_requirement``).
 _VERDICT = {True: ("pass", "meets"), False: ("fail", "does not meet"), None: ("na", "no estimate")}
 _e = escape
@@ -85,39 +82,22 @@ def json_name(axis: str) -> str:
 def analysed_series(table: pl.DataFrame, analysis: TailAnalysis) -> tuple[np.ndarray, np.ndarray] | None:
     """Times (s, on the analysis's pooled time axis) and SI of the epochs ``analysis`` ran on.
 
-    The series is rebuilt by the rule of :func:`~overbound.methods.tail_extrapolation.tail_analysis`,
-    Notes step 1 (solution epochs, alerts excluded, the service's PL >= AL and TTA filtering, stations
-    one after the other a day apart), then checked against the analysis: the same number of epochs,
+    The series is rebuilt by :func:`~overbound.methods.tail_extrapolation.analysed_series` (the
+    analysis does not keep it), then checked against the analysis: the same number of epochs,
     and every cluster maximum at its index, time and value. ``None`` when the check fails (the rule
     changed, or ``table`` is not the analysed one): the clusters figure is then not drawn rather
     than drawn wrong.
     """
     t = analysis.tail
-    if t is None or analysis.axis not in _PE_PL:
+    if t is None:
         return None
-    pe_col, pl_col = _PE_PL[analysis.axis]
-    if not {"time", "station", pe_col, pl_col} <= set(table.columns):
+    svc = analysis.services.get(analysis.service) if analysis.service is not None else None
+    try:
+        time_s, si = tail_series(
+            table, axis=analysis.axis, service=svc.service if svc is not None else analysis.service
+        )
+    except ValueError:  # InputError included: not the analysed table; an unknown service name
         return None
-    pe = np.abs(as_numpy(table[pe_col]).astype(np.float64, copy=False))
-    pls = as_numpy(table[pl_col]).astype(np.float64, copy=False)
-    tus = as_numpy(table["time"]).astype(np.int64, copy=False)
-    codes = as_numpy(table["station"].cast(pl.String).cast(pl.Categorical).to_physical()).astype(np.int64)
-    alert = (
-        as_numpy(table["alert"].fill_null(False)).astype(bool)
-        if "alert" in table.columns
-        else np.zeros(tus.size, dtype=bool)
-    )
-    ok = np.isfinite(pe) & np.isfinite(pls) & (pls > 0)
-    order = np.lexsort((tus, codes))
-    order = order[ok[order]]
-    if order.size == 0:
-        return None
-    tus, codes, pe, pls, alert = tus[order], codes[order], pe[order], pls[order], alert[order]
-    pooled = _pooled_time(tus, codes, round(analysis.counts.interval_s * 1e6))
-    keep = _keep(pooled, pls, alert, analysis)
-    if keep is None:
-        return None
-    time_s, si = pooled[keep] / 1e6, pe[keep] / pls[keep]
     c = t.clusters
     if si.size != t.n_total or (c.n_clusters and int(c.peak_index.max()) >= si.size):
         return None
@@ -128,69 +108,12 @@ def analysed_series(table: pl.DataFrame, analysis: TailAnalysis) -> tuple[np.nda
     return time_s, si
 
 
-def _pooled_time(tus: np.ndarray, codes: np.ndarray, dt: int) -> np.ndarray:
-    """Stations one after the other on one axis, a day (a whole number of intervals ``dt``) apart."""
-    dt = max(dt, 1)
-    first = np.flatnonzero(np.concatenate([[True], np.diff(codes) != 0]))
-    last = np.concatenate([first[1:], [tus.size]]) - 1
-    span = tus[last] - tus[first]
-    gap = ((_DAY_US + dt - 1) // dt) * dt
-    offs = np.concatenate([[0], np.cumsum(((span + dt - 1) // dt) * dt + gap)[:-1]])
-    rep = np.repeat(np.arange(first.size), last - first + 1)
-    return tus - tus[first][rep] + offs[rep]
-
-
-def _keep(
-    pooled: np.ndarray, pls: np.ndarray, alert: np.ndarray, analysis: TailAnalysis
-) -> np.ndarray | None:
-    """Epochs not alerted; with a filtering service also PL < AL and not within TTA before an alert.
-
-    ``None`` when the filtering service is not known by its name (a ``NAME:HAL:VAL`` level not
-    among the analysis's services).
-    """
-    keep = ~alert
-    if analysis.service is None:
-        return keep
-    hmi = analysis.services.get(analysis.service)
-    try:
-        svc = hmi.service if hmi is not None else parse_service(analysis.service)
-    except ValueError:
-        return None
-    al = svc.alert_limit(analysis.axis)
-    if al is None:
-        return keep
-    above = pls >= al
-    alerts = above | alert
-    keep &= ~above
-    at = pooled[alerts]
-    if at.size == 0:
-        return keep
-    nxt = np.searchsorted(at, pooled, side="right")  # the next alert strictly after each epoch
-    ahead = np.where(nxt < at.size, at[np.minimum(nxt, at.size - 1)] - pooled, np.iinfo(np.int64).max)
-    return keep & ~(ahead <= round(svc.tta_s * 1e6))
-
-
 # ---------------------------------------------------------------------------
 # formatting: every _h_* function returns HTML
 
 
-def _h_p(x: float | None) -> str:
-    """A probability: plain down to 0.001, else ``m·10<sup>e</sup>``; 0 is written 0."""
-    if x is None or not math.isfinite(x):
-        return "n.a."
-    if x == 0:
-        return "0"
-    if 1e-3 <= abs(x) < 1e4:
-        return f"{x:.4g}"
-    exp = math.floor(math.log10(abs(x)))
-    mant = x / 10.0**exp
-    if round(mant, 2) >= 10:
-        mant, exp = mant / 10, exp + 1
-    return f"{mant:.3g}·10<sup>{'−' if exp < 0 else ''}{abs(exp)}</sup>"
-
-
 def _h_ci(ci: tuple[float, float]) -> str:
-    return f"[{_h_p(ci[0])}, {_h_p(ci[1])}]"
+    return f"[{scientific(ci[0])}, {scientific(ci[1])}]"
 
 
 def _h_x(x: float | None, digits: int = 4) -> str:
@@ -233,7 +156,7 @@ def _headline_rows(a: TailAnalysis, t: TailFit) -> list[list[str]]:
         how = f"automatic: {_e(choice.method)}; Anderson-Darling p-value {_h_x(choice.goodness_of_fit, 3)}"
     unit = "cluster maxima" if t.decluster else "all exceedances"
     rows = [
-        ["P<sub>MI</sub> per epoch", _h_p(t.p), f"P(SI &gt; 1), SI = {_e(_SI[a.axis])}"],
+        ["P<sub>MI</sub> per epoch", scientific(t.p), f"P(SI &gt; 1), SI = {_e(_SI[a.axis])}"],
         [
             f"{conf} interval",
             _h_ci(t.p_ci),
@@ -242,15 +165,19 @@ def _headline_rows(a: TailAnalysis, t: TailFit) -> list[list[str]]:
         ],
         [
             "upper bound P<sub>MI95</sub>",
-            _h_p(t.p_95),
+            scientific(t.p_95),
             f"the larger of the one-sided {conf} bootstrap and profile-likelihood bounds",
         ],
         [
             f"P<sub>MI</sub> per approach ({APPROACH_S:g}&nbsp;s)",
-            _h_p(t.p_approach),
+            scientific(t.p_approach),
             f"{n_app:g} epochs; bootstrap {conf} interval {_h_ci(t.p_approach_ci)}",
         ],
-        ["upper bound per approach", _h_p(t.p_approach_95), f"one-sided {conf} bootstrap bound"],
+        [
+            "upper bound per approach",
+            scientific(t.p_approach_95),
+            f"the larger of the one-sided {conf} bootstrap and profile-likelihood bounds",
+        ],
         [
             "MI epochs observed (SI &gt; 1)",
             f"{a.n_mi:,}",
@@ -269,7 +196,7 @@ def _headline_rows(a: TailAnalysis, t: TailFit) -> list[list[str]]:
         )
     rows += [
         ["clusters above u", f"{t.n_clusters:,}", f"GPD fitted to the {unit}"],
-        ["exceedances of u", f"{t.n_exceedances:,}", f"exceedance rate {_h_p(t.zeta)} per epoch"],
+        ["exceedances of u", f"{t.n_exceedances:,}", f"exceedance rate {scientific(t.zeta)} per epoch"],
         ["extremal index θ", _h_x(t.extremal_index, 3), "Ferro-Segers intervals estimator at u"],
     ]
     c = t.cluster_size
@@ -279,7 +206,7 @@ def _headline_rows(a: TailAnalysis, t: TailFit) -> list[list[str]]:
                 "mean cluster size near SI = 1",
                 _h_x(c.mean, 3),
                 f"{c.sizes.size:,} clusters above SI = {_h_x(c.level)} (at u: {_h_x(c.at_threshold, 3)}); "
-                f"P<sub>MI</sub> = MI clusters per epoch {_h_p(t.cluster_rate)} × this size",
+                f"P<sub>MI</sub> = MI clusters per epoch {scientific(t.cluster_rate)} × this size",
             ]
         )
     g = t.gpd
@@ -310,12 +237,12 @@ def _gev_rows(a: TailAnalysis, conf: str) -> list[list[str]]:
         [
             "GEV on daily maxima",
             f"ξ {_h_x(f.xi, 3)}, μ {_h_x(f.loc, 3)}, σ {_h_x(f.scale, 3)}",
-            f"{blocks}; P(daily max &gt; 1) {_h_p(gev.p_block)}",
+            f"{blocks}; P(daily max &gt; 1) {scientific(gev.p_block)}",
         ],
         [
             "GEV P<sub>MI</sub> per epoch",
-            _h_p(gev.p_mi),
-            f"upper bound P<sub>MI95</sub> {_h_p(gev.p_mi_95)} ({conf}, {gev.n_boot} resamples)",
+            scientific(gev.p_mi),
+            f"upper bound P<sub>MI95</sub> {scientific(gev.p_mi_95)} ({conf}, {gev.n_boot} resamples)",
         ],
     ]
 
@@ -338,7 +265,7 @@ def _overbound_rows(a: TailAnalysis) -> list[list[str]]:
         verdict = "overbounded" if o.overbounded else '<span class="alarm">not overbounded</span>'
         tail = [
             "tail overbounding probability",
-            _h_p(o.probability),
+            scientific(o.probability),
             f"{verdict} (needs ≥ {_h_x(1.0 - o.alpha, 3)}; L<sub>Tail</sub> {_h_x(o.l_tail, 3)}, "
             f"{o.n_tail:,} of {o.n:,} samples in the tail)",
         ]
@@ -366,12 +293,12 @@ def _service_rows(a: TailAnalysis) -> list[list[str]]:
                 _e(name),
                 f"{h.alert_limit:g}&nbsp;m",
                 f"{h.counts.n_used:,}",
-                _h_p(h.p_hmi),
-                _h_p(h.p_hmi_95),
+                scientific(h.p_hmi),
+                scientific(h.p_hmi_95),
                 f"{h.exposure_s:g}&nbsp;s",
-                _h_p(h.p_hmi_exposure),
-                _h_p(h.p_hmi_exposure_95),
-                _h_p(h.integrity_risk),
+                scientific(h.p_hmi_exposure),
+                scientific(h.p_hmi_exposure_95),
+                scientific(h.integrity_risk),
                 _badge(h.meets_requirement, name, h.message),
                 _e(h.message),
             ]
@@ -629,10 +556,10 @@ def evt_section_html(analysis: TailAnalysis, *, series: tuple[np.ndarray, np.nda
     lead = (
         f"<p>Probability of misleading information per epoch, P<sub>MI</sub> = P(SI &gt; 1) with SI = "
         f"{_e(_SI[a.axis])}, extrapolated from the tail of SI by a generalised Pareto distribution "
-        f"(Veerman et al., GIMAT, sections 3.2–3.7): P<sub>MI</sub> = {_h_p(t.p)}, "
+        f"(Veerman et al., GIMAT, sections 3.2–3.7): P<sub>MI</sub> = {scientific(t.p)}, "
         f"{_pct(a.confidence)} interval {_h_ci(t.p_ci)}, upper bound P<sub>MI95</sub> = "
-        f"{_h_p(t.p_95)}; per {APPROACH_S:g}&nbsp;s approach {_h_p(t.p_approach)}, upper bound "
-        f"{_h_p(t.p_approach_95)}. {a.counts.n_used:,} epochs analysed{filt}; "
+        f"{scientific(t.p_95)}; per {APPROACH_S:g}&nbsp;s approach {scientific(t.p_approach)}, upper bound "
+        f"{scientific(t.p_approach_95)}. {a.counts.n_used:,} epochs analysed{filt}; "
         f"{a.n_boot:,} bootstrap resamples, seed {a.seed if a.seed is not None else 'none'}.</p>"
     )
     drawn, skipped = _figures(a, series)

@@ -43,7 +43,7 @@ from overbound.report.figures import (
     plot_timeseries,
 )
 from overbound.report.json import dumps, summary_dict
-from overbound.report.page import PAGE_CSS, escape, figure_html
+from overbound.report.page import PAGE_CSS, escape, figure_html, scientific
 from overbound.services import ServiceLevel
 
 __all__ = ["REPORT_NAME", "render_report", "section_ids", "write_report"]
@@ -141,21 +141,6 @@ _e = escape
 
 def _h_int(n: int | None) -> str:
     return "n.a." if n is None else f"{n:,}"
-
-
-def _h_sci(x: float | None) -> str:
-    """A probability: plain down to 0.001, else ``m·10<sup>e</sup>``."""
-    if x is None or not math.isfinite(x):
-        return "n.a."
-    if x == 0:
-        return "0"
-    if 1e-3 <= abs(x) < 1e4:
-        return f"{x:.4g}"
-    exp = math.floor(math.log10(abs(x)))
-    mant = x / 10.0**exp
-    if round(mant, 2) >= 10:
-        mant, exp = mant / 10, exp + 1
-    return f"{mant:.3g}·10<sup>{'−' if exp < 0 else ''}{abs(exp)}</sup>"
 
 
 def _h_m(x: float | None, digits: int = 2) -> str:
@@ -392,7 +377,7 @@ def _stations(a: Analysis) -> str:
                     _num(_h_m(c.vpe95)),
                     _e(s.name),
                     *(_num(_h_pct(x, c.n_total)) for x in (k.horizontal, k.vertical, k.combined)),
-                    _num(_h_sci(cont.risk if cont else None)),
+                    _num(scientific(cont.risk if cont else None)),
                     _num(f"{h.mi} / {'–' if v is None else v.mi}"),
                     _num(f"{h.hmi} / {'–' if v is None else v.hmi}"),
                 ]
@@ -429,7 +414,7 @@ def _value(v: Verdict) -> str:
     if v.kpi.startswith("availability"):
         return _h_share(float(v.value))
     if v.kpi.startswith("continuity"):
-        return _h_sci(float(v.value))
+        return scientific(float(v.value))
     if v.kpi.endswith("(m)"):
         return _h_m(float(v.value))
     return _h_int(int(v.value))
@@ -442,7 +427,7 @@ def _requirement(v: Verdict) -> str:
     if v.kpi.startswith("availability"):
         return f"{sign} {_h_share(float(v.required))}"
     if v.kpi.startswith("continuity"):
-        return f"{sign} {_h_sci(float(v.required))}"
+        return f"{sign} {scientific(float(v.required))}"
     if v.kpi.endswith("(m)"):
         return f"{sign} {float(v.required):g}&nbsp;m"
     return f"{sign} {_h_int(int(v.required))}"
@@ -522,7 +507,7 @@ def _kpi_rows(a: Analysis, s: ServiceLevel, k: ServiceKPI) -> list[list[str]]:
             [
                 "Continuity risk",
                 _e(x.axis),
-                _num(_h_sci(risk)),
+                _num(scientific(risk)),
                 _continuity_counts(x.continuity),
                 _num("—"),
                 "—",
@@ -579,8 +564,8 @@ def _service(a: Analysis, s: ServiceLevel) -> str:
     k = a.counting.services[s.name]
     limits = f"HAL {s.hal:g} m, " + (f"VAL {s.val:g} m" if s.val is not None else "no vertical alert limit")
     intro = (
-        f'<p class="limits">{_e(limits)} · integrity risk {_h_sci(s.integrity_risk)} per '
-        f"{s.integrity_exposure_s:g} s · continuity risk {_h_sci(s.continuity_risk)} per "
+        f'<p class="limits">{_e(limits)} · integrity risk {scientific(s.integrity_risk)} per '
+        f"{s.integrity_exposure_s:g} s · continuity risk {scientific(s.continuity_risk)} per "
         f"{s.continuity_window_s:g} s · availability "
         f"{_h_share(s.availability)}–{_h_share(s.availability_max)}"
         f"<br><small>Requirements: {_e(s.source or 'user-defined')}</small></p>"

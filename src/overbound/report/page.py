@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import base64
 import html
+import math
 
 from matplotlib.axes import Axes
 
 from overbound.report.figures import close_figure, figure_png
 
-__all__ = ["FIGURE_DPI", "PAGE_CSS", "escape", "figure_html"]
+__all__ = ["FIGURE_DPI", "PAGE_CSS", "escape", "figure_html", "scientific"]
 
 #: Resolution of the figures embedded in the pages.
 FIGURE_DPI = 110
@@ -102,3 +103,18 @@ th{white-space:normal}
 }
 @page{size:A4;margin:14mm}
 """
+
+
+def scientific(x: float | None) -> str:
+    """A probability as HTML: plain down to 0.001, else ``m·10<sup>e</sup>``; 0 is 0, None/NaN ``n.a.``."""
+    if x is None or not math.isfinite(x):
+        return "n.a."
+    if x == 0:
+        return "0"
+    if 1e-3 <= abs(x) < 1e4:
+        return f"{x:.4g}"
+    exp = math.floor(math.log10(abs(x)))
+    mant = x / 10.0**exp
+    if round(mant, 2) >= 10:
+        mant, exp = mant / 10, exp + 1
+    return f"{mant:.3g}·10<sup>{'−' if exp < 0 else ''}{abs(exp)}</sup>"
