@@ -24,7 +24,8 @@ from dataclasses import dataclass, field
 import numpy as np
 import polars as pl
 
-from overbound.io.schema import InputError, as_numpy
+from overbound.io.schema import InputError
+from overbound.methods.pooling import PooledEpochs, pool_epochs
 from overbound.report.json import dumps
 from overbound.services import K_H_PA, K_V_PA, SERVICES, ServiceLevel, parse_service
 from overbound.stats.bootstrap import bootstrap_gev, bootstrap_gpd, p_exceed_ci, percentile_ci
@@ -89,9 +90,9 @@ GEV_MIN_BOOT_BLOCKS = 10
 ACF_MAX_LAG_S = 3600.0
 #: Lower end of the KRS core range in normalised-error units (small L carry no information).
 KRS_L_MIN = 0.5
-_PE_PL = {"vertical": ("vpe", "vpl"), "horizontal": ("hpe", "hpl")}
+
 _K = {"vertical": K_V_PA, "horizontal": K_H_PA}
-_DAY_US = 86_400_000_000
+
 #: JSON keys of the issue (top level, ``schema`` included).
 EVT_KEYS = frozenset(
     {
@@ -445,59 +446,6 @@ def _rng(rng: np.random.Generator | int | None) -> np.random.Generator:
     return rng if isinstance(rng, np.random.Generator) else np.random.default_rng(rng)
 
 
-@dataclass(frozen=True, slots=True)
-class _Prepared:
-    t_us: np.ndarray  # pooled time of every solution epoch (stations placed one after the other)
-    day: np.ndarray  # station-day block id
-    pe: np.ndarray
-    pl: np.ndarray
-    alert: np.ndarray
-    n_rows: int
-    n_no_solution: int
-    n_stations: int
-    interval_us: int
-
-
-def _prepare(table: pl.DataFrame, axis: str) -> _Prepared:
-    if axis not in _PE_PL:
-        raise ValueError(f"axis must be 'vertical' or 'horizontal', got {axis!r}")
-    pe_col, pl_col = _PE_PL[axis]
-    missing = [c for c in ("time", "station", pe_col, pl_col) if c not in table.columns]
-    if missing:
-        raise InputError("<epoch table>", f"the {axis} EVT analysis needs column(s) {', '.join(missing)}")
-    pe = np.abs(as_numpy(table[pe_col]).astype(np.float64, copy=False))
-    pls = as_numpy(table[pl_col]).astype(np.float64, copy=False)
-    t = as_numpy(table["time"]).astype(np.int64, copy=False)
-    codes = as_numpy(table["station"].cast(pl.String).cast(pl.Categorical).to_physical()).astype(np.int64)
-    alert = (
-        as_numpy(table["alert"].fill_null(False)).astype(bool)
-        if "alert" in table.columns
-        else np.zeros(t.size, dtype=bool)
-    )
-    ok = np.isfinite(pe) & np.isfinite(pls) & (pls > 0)
-    order = np.lexsort((t, codes))
-    order = order[ok[order]]
-    t, codes, pe, pls, alert = t[order], codes[order], pe[order], pls[order], alert[order]
-    if t.size == 0:
-        raise InputError("<epoch table>", "no epoch with a solution")
-    steps = np.diff(t)[np.diff(codes) == 0]
-    steps = steps[steps > 0]
-    med = float(np.median(steps)) if steps.size else 1e6
-    near = steps[np.abs(steps - med) <= med / 4] if steps.size else steps
-    dt = max(1, round(float(near.mean()))) if near.size else max(1, round(med))
-    # stations one after the other on one time axis, a day (and a whole number of intervals) apart
-    first = np.flatnonzero(np.concatenate([[True], np.diff(codes) != 0]))
-    last = np.concatenate([first[1:], [t.size]]) - 1
-    span = t[last] - t[first]
-    gap = ((_DAY_US + dt - 1) // dt) * dt
-    offs = np.concatenate([[0], np.cumsum(((span + dt - 1) // dt) * dt + gap)[:-1]])
-    rep = np.repeat(np.arange(first.size), last - first + 1)
-    pooled = t - t[first][rep] + offs[rep]
-    day = t // _DAY_US
-    day_id = np.concatenate([[0], np.cumsum((np.diff(day) != 0) | (np.diff(codes) != 0))])
-    return _Prepared(pooled, day_id, pe, pls, alert, table.height, int(table.height - t.size), first.size, dt)
-
-
 def analysed_series(
     table: pl.DataFrame, *, axis: str = "vertical", service: str | ServiceLevel | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -506,13 +454,13 @@ def analysed_series(
     Its Notes step 1: solution epochs, alerts excluded, with ``service`` the PL >= AL and TTA filter.
     """
     svc = parse_service(service) if isinstance(service, str) else service
-    d = _prepare(table, axis)
+    d = pool_epochs(table, axis)
     al = svc.alert_limit(axis) if svc is not None else None
     keep = _hmi_keep(d, al, svc.tta_s if svc is not None else 0.0)[0]
     return d.t_us[keep] / 1e6, d.pe[keep] / d.pl[keep]
 
 
-def _hmi_keep(d: _Prepared, alert_limit: float | None, tta_s: float) -> tuple[np.ndarray, int, int, int]:
+def _hmi_keep(d: PooledEpochs, alert_limit: float | None, tta_s: float) -> tuple[np.ndarray, int, int, int]:
     """Epochs kept (not alerted; with an AL: PL < AL and not within TTA before an alert) and counts."""
     keep = ~d.alert
     n_alert = int(d.alert.sum())
@@ -531,7 +479,7 @@ def _hmi_keep(d: _Prepared, alert_limit: float | None, tta_s: float) -> tuple[np
     return keep & ~tta, n_alert, n_above, int(tta.sum())
 
 
-def _counts(d: _Prepared, n_alert: int, n_above: int, n_tta: int, n_used: int) -> EpochCounts:
+def _counts(d: PooledEpochs, n_alert: int, n_above: int, n_tta: int, n_used: int) -> EpochCounts:
     return EpochCounts(
         d.n_rows, d.n_no_solution, n_alert, n_above, n_tta, n_used, d.n_stations, d.interval_us / 1e6
     )
@@ -958,7 +906,7 @@ def tail_analysis(
     g = _rng(rng)
     seed = rng if isinstance(rng, int) else None
     g_main, g_gev, g_over, g_svc = g.spawn(4)
-    d = _prepare(table, axis)
+    d = pool_epochs(table, axis)
     al = svc.alert_limit(axis) if svc is not None else None
     if svc is not None and al is None:
         raise ValueError(f"service {svc.name} has no {axis} alert limit")
@@ -1052,7 +1000,7 @@ def tail_analysis(
 
 
 def _service_hmi(
-    d: _Prepared,
+    d: PooledEpochs,
     s: ServiceLevel,
     axis: str,
     threshold: float,
