@@ -1,0 +1,555 @@
+"""GPS broadcast ephemerides from RINEX 2 and 3 navigation files, and satellite position and clock.
+
+Reading
+-------
+:func:`read_rinex_nav` keeps the GPS LNAV records of a RINEX 2 GPS navigation file (``.yyn``)
+or of a RINEX 3 GPS or mixed one (``...MN.rnx``), and counts the records of the other systems.
+A record starts on a line whose first three columns are not blank (the PRN in RINEX 2, the
+satellite identifier in RINEX 3) and holds the epoch (``toc``) and three numbers, followed by
+seven lines of four numbers (``BROADCAST ORBIT - 1..7``; the last one may be shorter). All
+numbers of all records form one byte matrix of 19-column fields; the Fortran ``D`` exponent
+of RINEX 2 is turned into ``E`` and numpy reads them in one cast (:func:`overbound.io._rinex.parse_float`).
+
+The table (:attr:`GpsEphemerides.table`) has one row per record, sorted by PRN then time of
+clock, in SI units as RINEX gives them (s, m, rad, rad/s): ``sat``, ``prn``, ``toc`` (GPST),
+``af0``, ``af1``, ``af2``, ``iode``, ``crs``, ``delta_n``, ``m0``, ``cuc``, ``e``, ``cus``,
+``sqrt_a``, ``toe`` (s of GPS week), ``cic``, ``omega0``, ``cis``, ``i0``, ``crc``, ``omega``,
+``omega_dot``, ``idot``, ``l2_codes``, ``week`` (continuous GPS week of ``toe``), ``l2p_flag``,
+``sv_accuracy`` (URA in m), ``health``, ``tgd``, ``iodc``, ``ttx`` (transmission time of message,
+s of ``week``), ``fit_interval`` (hours as written; 0 means unknown, i.e. 4 h), then
+``toe_time`` and ``ttx_time`` (GPST datetimes of ``toe`` and ``ttx``), ``file`` and ``line``.
+
+Repeated records (same PRN, toc, IODE and IODC, as merged daily files often contain) keep
+the first and are counted as ``duplicate``; a record with fewer or more than eight lines, an
+unreadable number or epoch, or an impossible orbit (``sqrt_a`` <= 0, ``e`` outside [0, 1)) is
+rejected with file and line.
+
+Orbit and clock
+---------------
+:func:`broadcast_state` evaluates IS-GPS-200 Table 20-IV (user algorithm for ephemeris
+determination) and 20.3.3.3.3.1 (satellite clock correction with the relativistic term),
+vectorised over any number of (record, time) pairs. The position is in the ECEF frame *at the
+time given*: for a range, the engine evaluates it at the transmission time and then rotates
+it into the frame of the reception time with :func:`rotate_earth` (Sagnac effect).
+:func:`select_ephemeris` picks, per satellite and time, the record a receiver would be using.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import polars as pl
+
+from overbound.io._rinex import (
+    GPS_EPOCH_US,
+    US,
+    Lines,
+    civil_to_us,
+    load_bytes,
+    parse_digits,
+    parse_float,
+    to_gpst,
+)
+from overbound.io.open import Source, source_name
+from overbound.io.schema import InputError, ReadReport
+from overbound.sbas.frames import REJECTED_SCHEMA
+
+__all__ = [
+    "FIELDS",
+    "GPS_F",
+    "GPS_MU",
+    "GPS_OMEGA_E",
+    "SPEED_OF_LIGHT",
+    "BroadcastState",
+    "GpsEphemerides",
+    "NavHeader",
+    "broadcast_state",
+    "read_rinex_nav",
+    "rotate_earth",
+    "select_ephemeris",
+]
+
+#: Earth's gravitational constant for GPS user equations, m^3/s^2 (IS-GPS-200 Table 20-IV).
+GPS_MU = 3.986005e14
+#: WGS-84 Earth rotation rate, rad/s (IS-GPS-200 Table 20-IV).
+GPS_OMEGA_E = 7.2921151467e-5
+#: Relativistic clock constant F = -2 sqrt(mu) / c^2, s/m^(1/2) (IS-GPS-200 20.3.3.3.3.1).
+GPS_F = -4.442807633e-10
+SPEED_OF_LIGHT = 299_792_458.0
+_WEEK_US = 604_800 * US
+_HALF_WEEK_S = 302_400.0
+
+#: The 29 numbers after the epoch, in record order (RINEX 2.11 Table A4, the same in RINEX 3).
+FIELDS = (
+    "af0", "af1", "af2",
+    "iode", "crs", "delta_n", "m0",
+    "cuc", "e", "cus", "sqrt_a",
+    "toe", "cic", "omega0", "cis",
+    "i0", "crc", "omega", "omega_dot",
+    "idot", "l2_codes", "week", "l2p_flag",
+    "sv_accuracy", "health", "tgd", "iodc",
+    "ttx", "fit_interval",
+)  # fmt: skip
+_INTEGER = ("iode", "l2_codes", "week", "l2p_flag", "health", "iodc")
+#: Fields that an orbit, clock or ephemeris selection cannot do without.
+_REQUIRED = (
+    "af0", "af1", "af2", "iode", "crs", "delta_n", "m0", "cuc", "e", "cus", "sqrt_a", "toe",
+    "cic", "omega0", "cis", "i0", "crc", "omega", "omega_dot", "idot", "week", "health", "tgd",
+    "iodc", "ttx",
+)  # fmt: skip
+_LINES_GPS = 8
+_REASONS_TEXT = {
+    "record_length": "GPS record without exactly 8 lines",
+    "bad_epoch": "unreadable PRN or time of clock",
+    "bad_number": "unreadable number",
+    "missing_field": "blank orbit or clock field",
+    "implausible_orbit": "sqrt(A) <= 0 or eccentricity outside [0, 1)",
+    "duplicate": "same PRN, toc, IODE and IODC as an earlier record",
+}
+
+
+@dataclass(frozen=True, slots=True)
+class NavHeader:
+    """Header of a navigation file: GPS Klobuchar coefficients, GPS-UTC parameters, leap seconds.
+
+    ``ion_alpha``/``ion_beta``: the 4 + 4 Klobuchar coefficients (s, s/semicircle^n), ``None`` if
+    absent; ``delta_utc``: (A0 s, A1 s/s, reference time s of week, reference week).
+    """
+
+    version: float
+    ion_alpha: tuple[float, ...] | None = None
+    ion_beta: tuple[float, ...] | None = None
+    delta_utc: tuple[float, float, int, int] | None = None
+    leap_seconds: int | None = None
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class GpsEphemerides:
+    """GPS broadcast ephemerides of one or several navigation files (see the module notes)."""
+
+    table: pl.DataFrame
+    header: NavHeader
+    other_systems: dict[str, int] = field(default_factory=dict)
+    rejected: pl.DataFrame = field(default_factory=lambda: pl.DataFrame(schema=REJECTED_SCHEMA))
+    files: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class BroadcastState:
+    """Satellite position and clock from broadcast ephemerides at given GPS times.
+
+    Attributes
+    ----------
+    position : (n, 3) ECEF metres, in the Earth-fixed frame of the evaluation time.
+    clock : (n,) s, satellite clock offset af0 + af1 dt + af2 dt^2 + relativistic term, for
+        the ionosphere-free P(Y) combination; an L1 C/A user subtracts ``tgd`` (IS-GPS-200 20.3.3.3.3.2).
+    relativistic : (n,) s, F e sqrt(A) sin(E_k), included in ``clock``.
+    tgd : (n,) s, group delay of the record.
+    ecc_anomaly : (n,) rad, E_k.
+    """
+
+    position: np.ndarray
+    clock: np.ndarray
+    relativistic: np.ndarray
+    tgd: np.ndarray
+    ecc_anomaly: np.ndarray
+
+
+def read_rinex_nav(
+    sources: Source | Sequence[Source], *, strict: bool = False
+) -> tuple[GpsEphemerides, ReadReport]:
+    """Read the GPS ephemerides of one or several RINEX 2 / 3 navigation files (plain, gzip or ``.Z``).
+
+    Parameters
+    ----------
+    sources : a path or stream, or several (e.g. the previous day and the day): their records are
+        merged, repeated ones dropped.
+    strict : raise :class:`InputError` at the first rejected record.
+
+    Returns
+    -------
+    eph : :class:`GpsEphemerides` (the header is the first file's).
+    report : ``rows_read`` GPS records seen, ``rows_kept``, ``rejected`` by reason, and in the
+        notes the records of other systems.
+
+    Raises
+    ------
+    InputError
+        Not a RINEX navigation file, a RINEX 2 GLONASS or GEO navigation file, an unsupported
+        version, no ``END OF HEADER``, a truncated compressed stream, or (``strict``) a bad record.
+    """
+    many = isinstance(sources, Sequence) and not isinstance(sources, str | bytes)
+    items = list(sources) if many else [sources]  # type: ignore[list-item]
+    parts = [_read_one(s, strict) for s in items]
+    header = parts[0][1]
+    table = pl.concat([p[0] for p in parts], how="vertical")
+    rejected = pl.concat([p[3] for p in parts], how="vertical")
+    table, dups = _drop_duplicates(table)
+    if strict and dups.height:
+        row = dups.row(0, named=True)
+        raise InputError(row["file"], _REASONS_TEXT["duplicate"], line=int(row["line"]))
+    rejected = pl.concat([rejected, dups], how="vertical").sort("file", "line", maintain_order=True)
+    others: Counter = Counter()
+    for p in parts:
+        others.update(p[2])
+    files = tuple(source_name(s) for s in items)
+    eph = GpsEphemerides(table, header, dict(sorted(others.items())), rejected, files)
+    return eph, _report(eph, sum(p[4] for p in parts))
+
+
+def _read_one(source: Source, strict: bool) -> tuple[pl.DataFrame, NavHeader, Counter, pl.DataFrame, int]:
+    """GPS records, header, other systems' record counts, rejections and GPS records seen of one file."""
+    name = source_name(source)
+    lines = Lines.of(load_bytes(source))
+    header, body = _parse_header(lines, name)
+    v3 = header.version >= 3
+    rows = np.arange(body, len(lines), dtype=np.int64)
+    starts = rows[(lines.chars(rows, 0, 3) != ord(" ")).any(axis=1)]
+    system = lines.col(starts, 0) if v3 else np.full(len(starts), ord("G"), np.uint8)
+    others = Counter(chr(c) for c in system[system != ord("G")].tolist())
+    gps = np.flatnonzero(system == ord("G"))
+    rej: list[tuple[int, str]] = []
+    nonblank = np.flatnonzero(lines.length > 0)
+    ends = _record_ends(starts, nonblank, len(lines))[gps]
+    first = starts[gps]
+    good_len = (ends - first) == _LINES_GPS
+    rej += [(int(i), "record_length") for i in first[~good_len]]
+    first = first[good_len]
+    table, bad = _decode_records(lines, first, v3)
+    for reason, mask in bad.items():
+        rej += [(int(i), reason) for i in first[mask]]
+    keep = ~np.logical_or.reduce(list(bad.values())) if bad else np.ones(len(first), bool)
+    table = table.filter(pl.Series(keep)).with_columns(
+        pl.lit(name).alias("file"), pl.Series("line", first[keep] + 1)
+    )
+    rej.sort()
+    if strict and rej:
+        raise InputError(name, _REASONS_TEXT[rej[0][1]], line=rej[0][0] + 1)
+    rejected = pl.DataFrame(
+        {"file": [name] * len(rej), "line": [i + 1 for i, _ in rej], "reason": [r for _, r in rej]},
+        schema=REJECTED_SCHEMA,
+    )
+    return table, header, others, rejected, len(gps)
+
+
+def _record_ends(starts: np.ndarray, nonblank: np.ndarray, n: int) -> np.ndarray:
+    """One past the last non-blank line of each record (records end at the next start)."""
+    nxt = np.append(starts[1:], n)
+    last = np.searchsorted(nonblank, nxt, side="left") - 1  # last non-blank line before the next start
+    return np.where(last >= 0, nonblank[np.maximum(last, 0)] + 1, starts + 1)
+
+
+# --------------------------------------------------------------------------- header
+
+
+def _parse_header(lines: Lines, name: str) -> tuple[NavHeader, int]:
+    if len(lines) == 0 or lines.length[0] == 0:
+        raise InputError(name, "empty file, expected a RINEX navigation file")
+    first = lines.text(0)
+    if first[60:].strip() != "RINEX VERSION / TYPE":
+        raise InputError(
+            name, f"not a RINEX file: first line {first[:60].rstrip()!r} has no 'RINEX VERSION / TYPE'"
+        )
+    try:
+        version = float(first[:9])
+    except ValueError:
+        raise InputError(name, f"unreadable RINEX version {first[:9]!r}", line=1) from None
+    kind = first[20:21]
+    if version < 3 and kind in ("G", "H"):
+        what = "GLONASS" if kind == "G" else "GEO (SBAS)"
+        raise InputError(name, f"RINEX 2 {what} navigation file: no GPS ephemerides", line=1)
+    if kind != "N":
+        raise InputError(name, f"RINEX file of type {kind!r}, expected navigation data ('N')", line=1)
+    if not (2.0 <= version < 4.0):
+        raise InputError(
+            name, f"RINEX navigation version {version:.2f} not supported (2.xx and 3.0x)", line=1
+        )
+    out: dict = {"version": version}
+    for i in range(1, min(len(lines), 5000)):
+        text = lines.text(i)
+        label, body = text[60:].strip(), text[:60]
+        if label == "END OF HEADER":
+            return NavHeader(**out), i + 1
+        try:
+            _header_line(label, body, out)
+        except ValueError:
+            raise InputError(name, f"unreadable header line {label!r}", line=i + 1) from None
+    raise InputError(name, "no END OF HEADER: truncated or not a RINEX navigation file")
+
+
+def _header_line(label: str, body: str, out: dict) -> None:
+    num = lambda s: float(s.replace("D", "E").replace("d", "E"))  # noqa: E731
+    if label in ("ION ALPHA", "ION BETA"):  # RINEX 2: 2X, 4D12.4
+        out["ion_alpha" if label == "ION ALPHA" else "ion_beta"] = tuple(
+            num(body[2 + 12 * k : 14 + 12 * k]) for k in range(4)
+        )
+    elif label == "IONOSPHERIC CORR" and body[:4] in ("GPSA", "GPSB"):  # RINEX 3: A4, 1X, 4D12.4
+        out["ion_alpha" if body[:4] == "GPSA" else "ion_beta"] = tuple(
+            num(body[5 + 12 * k : 17 + 12 * k]) for k in range(4)
+        )
+    elif label == "DELTA-UTC: A0,A1,T,W":  # RINEX 2: 3X, 2D19.12, 2I9
+        out["delta_utc"] = (num(body[3:22]), num(body[22:41]), int(body[41:50]), int(body[50:59]))
+    elif label == "TIME SYSTEM CORR" and body[:4] == "GPUT":  # RINEX 3: A4, 1X, D17.10, D16.9, I7, I5
+        out["delta_utc"] = (num(body[5:22]), num(body[22:38]), int(body[38:45]), int(body[45:50]))
+    elif label == "LEAP SECONDS":
+        out["leap_seconds"] = int(body[:6])
+
+
+# --------------------------------------------------------------------------- records
+
+
+def _decode_records(lines: Lines, first: np.ndarray, v3: bool) -> tuple[pl.DataFrame, dict[str, np.ndarray]]:
+    """All numbers of the GPS records at once, as a table; also the rejection masks."""
+    n = len(first)
+    c0, step = (23, 4) if v3 else (22, 3)
+    # (line offset, column) of the 3 + 7 x 4 = 31 numbers, the last two being spares.
+    spots = [(0, c0 + 19 * k) for k in range(3)] + [
+        (r, step + 19 * k) for r in range(1, _LINES_GPS) for k in range(4)
+    ]
+    spots = spots[: len(FIELDS)]
+    line = (first[:, None] + np.array([r for r, _ in spots])[None, :]).ravel()
+    col = np.tile(np.array([c for _, c in spots]), n)
+    values, ok, blank = parse_float(lines.chars(line, col, 19))
+    values = values.reshape(n, len(FIELDS))
+    ok = ok.reshape(n, len(FIELDS))
+    blank = blank.reshape(n, len(FIELDS))
+    prn, toc, epoch_ok = _record_epochs(lines, first, v3)
+    cols = {f: values[:, k] for k, f in enumerate(FIELDS)}
+    required = np.array([f in _REQUIRED for f in FIELDS])
+    bad = {
+        "bad_epoch": ~epoch_ok,
+        "bad_number": ~ok.all(axis=1),
+        "missing_field": (blank & required[None, :]).any(axis=1),
+    }
+    bad["implausible_orbit"] = ~(cols["sqrt_a"] > 0) | ~((cols["e"] >= 0) & (cols["e"] < 1))
+    bad["implausible_orbit"] &= ~bad["missing_field"] & ~bad["bad_number"]
+    week = np.nan_to_num(cols["week"]).astype(np.int64)
+    toe_us = GPS_EPOCH_US + week * _WEEK_US + np.round(np.nan_to_num(cols["toe"]) * US).astype(np.int64)
+    ttx_us = GPS_EPOCH_US + week * _WEEK_US + np.round(np.nan_to_num(cols["ttx"]) * US).astype(np.int64)
+    data: dict[str, pl.Series] = {
+        "sat": pl.Series("sat", [f"G{p:02d}" for p in prn.tolist()], dtype=pl.String),
+        "prn": pl.Series("prn", prn.astype(np.int16)),
+        "toc": pl.Series("toc", toc, dtype=pl.Int64).cast(pl.Datetime("us")),
+    }
+    for f in FIELDS:
+        if f in _INTEGER:
+            data[f] = pl.Series(f, np.round(np.nan_to_num(cols[f])).astype(np.int32))
+        else:
+            data[f] = pl.Series(f, cols[f])
+    data["toe_time"] = pl.Series("toe_time", toe_us, dtype=pl.Int64).cast(pl.Datetime("us"))
+    data["ttx_time"] = pl.Series("ttx_time", ttx_us, dtype=pl.Int64).cast(pl.Datetime("us"))
+    return pl.DataFrame(list(data.values())), bad
+
+
+def _record_epochs(lines: Lines, first: np.ndarray, v3: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """PRN, time of clock (GPS microseconds) and whether both read."""
+    if v3:  # A1, I2.2, 1X, I4, 5(1X, I2.2): seconds are whole
+        prn, p_ok, _ = parse_digits(lines.chars(first, 1, 2))
+        year, y_ok, _ = parse_digits(lines.chars(first, 4, 4))
+        parts = [parse_digits(lines.chars(first, c, 2)) for c in (9, 12, 15, 18, 21)]
+        sec_us = parts[4][0] * US
+        sec_ok = parts[4][1]
+        parts = parts[:4]
+    else:  # I2, 1X, I2.2, 4(1X, I2), F5.1
+        prn, p_ok, _ = parse_digits(lines.chars(first, 0, 2))
+        year, y_ok, _ = parse_digits(lines.chars(first, 3, 2))
+        year = np.where(year < 80, 2000 + year, 1900 + year)
+        parts = [parse_digits(lines.chars(first, c, 2)) for c in (6, 9, 12, 15)]
+        sec, sec_ok, _ = parse_float(lines.chars(first, 17, 5))
+        sec_us = np.round(np.nan_to_num(sec) * US).astype(np.int64)
+    t, date_ok = civil_to_us(year, *(p[0] for p in parts), sec_us)
+    ok = (
+        p_ok
+        & (prn >= 1)
+        & (prn <= 63)
+        & y_ok
+        & sec_ok
+        & date_ok
+        & np.logical_and.reduce([p[1] for p in parts])
+    )
+    return prn, to_gpst(t, "GPS", ""), ok
+
+
+def _drop_duplicates(table: pl.DataFrame) -> tuple[pl.DataFrame, pl.DataFrame]:
+    """Sort by PRN and toc (then file order) and drop repeats of (PRN, toc, IODE, IODC)."""
+    table = table.with_row_index("_order").sort("prn", "toc", "_order")
+    dup = table.select(~pl.struct("prn", "toc", "iode", "iodc").is_first_distinct()).to_series()
+    rejected = table.filter(dup).select(
+        pl.col("file"), pl.col("line").cast(pl.Int64), pl.lit("duplicate").alias("reason")
+    )
+    return table.filter(~dup).drop("_order"), rejected
+
+
+def _report(eph: GpsEphemerides, n_seen: int) -> ReadReport:
+    rej = eph.rejected
+    first = ""
+    if rej.height:
+        row = rej.row(0, named=True)
+        first = f"{row['file']}:{row['line']}: {row['reason']}"
+    t = eph.table
+    sats = t["prn"].n_unique() if t.height else 0
+    others = ", ".join(f"{s}: {n}" for s, n in eph.other_systems.items()) or "none"
+    return ReadReport(
+        source=", ".join(eph.files),
+        format=f"rinex-nav {eph.header.version:.2f}",
+        rows_read=n_seen,
+        rows_kept=t.height,
+        rejected=dict(Counter(rej["reason"].to_list())),
+        first_bad=first,
+        notes=(
+            f"GPS records kept: {t.height} for {sats} satellites, "
+            f"unhealthy: {int((t['health'] != 0).sum()) if t.height else 0}",
+            f"records of other systems (not read): {others}",
+        ),
+    )
+
+
+# --------------------------------------------------------------------------- selection
+
+
+def select_ephemeris(
+    eph: pl.DataFrame,
+    prn: np.ndarray,
+    time_us: np.ndarray,
+    *,
+    iode: np.ndarray | None = None,
+    healthy_only: bool = True,
+) -> np.ndarray:
+    """Row of ``eph`` a receiver uses for each (PRN, GPS time), or -1 when there is none.
+
+    The rule is a receiver's: among the records of that PRN already transmitted (``ttx_time`` <=
+    t), whose fit interval covers t (``|t - toe_time|`` <= half of it, 4 h when unknown) and
+    healthy (``health`` == 0, unless ``healthy_only`` is False), take the most recently
+    transmitted; with ``iode``, only records with that IODE qualify (matching SBAS long-term
+    corrections, DO-229 A.4.4.7). Vectorised: one search per query, then a backward walk over
+    older records of the same PRN for the queries whose latest record does not qualify.
+
+    Parameters
+    ----------
+    eph : :attr:`GpsEphemerides.table` (any row order).
+    prn, time_us : query PRNs and GPS times (int64 microseconds), broadcast together.
+    iode : required IODE per query (negative: any).
+    """
+    prn, time_us = np.broadcast_arrays(np.asarray(prn, np.int64), np.asarray(time_us, np.int64))
+    want = None if iode is None else np.broadcast_to(np.asarray(iode, np.int64), prn.shape)
+    rec_prn = eph["prn"].to_numpy().astype(np.int64)
+    ttx = eph["ttx_time"].dt.epoch("us").to_numpy()
+    toe = eph["toe_time"].dt.epoch("us").to_numpy()
+    fit = eph["fit_interval"].to_numpy()
+    half_fit = np.where(fit > 1, fit, 4.0) * 1800 * US
+    usable = (eph["health"].to_numpy() == 0) if healthy_only else np.ones(eph.height, bool)
+    rec_iode = eph["iode"].to_numpy().astype(np.int64)
+    base = min(int(ttx.min()), int(time_us.min())) if eph.height and prn.size else 0
+    span = np.int64(1) << np.int64(50)  # 35 years of microseconds: PRN in the upper bits
+    key = rec_prn * span + np.clip(ttx - base, 0, span - 1)
+    order = np.argsort(key, kind="stable")
+    key = key[order]
+    q = prn.ravel() * span + np.clip(time_us.ravel() - base, 0, span - 1)
+    pos = np.searchsorted(key, q, side="right") - 1
+    out = np.full(q.size, -1, np.int64)
+    active = np.arange(q.size)
+    t = time_us.ravel()
+    while active.size:
+        p = pos[active]
+        alive = p >= 0
+        active, p = active[alive], p[alive]
+        row = order[p]
+        alive = rec_prn[row] == prn.ravel()[active]
+        active, p, row = active[alive], p[alive], row[alive]
+        ok = usable[row] & (np.abs(t[active] - toe[row]) <= half_fit[row])
+        if want is not None:
+            w = want.ravel()[active]
+            ok &= (w < 0) | (rec_iode[row] == w)
+        out[active[ok]] = row[ok]
+        active = active[~ok]
+        pos[active] -= 1
+    return out.reshape(prn.shape)
+
+
+# --------------------------------------------------------------------------- orbit and clock
+
+
+def broadcast_state(
+    eph: pl.DataFrame,
+    rows: np.ndarray,
+    time_us: np.ndarray,
+    offset_s: np.ndarray | float = 0.0,
+) -> BroadcastState:
+    """Position and clock of the satellites of ``eph[rows]`` at GPS times ``time_us + offset_s``.
+
+    Implements IS-GPS-200 Table 20-IV: mean motion n = sqrt(mu / A^3) + delta_n, mean anomaly
+    M_k = M0 + n t_k, Kepler's equation M_k = E_k - e sin E_k (Newton iterations to 1e-14 rad),
+    true anomaly, argument of latitude with the second-harmonic corrections (cus/cuc, crs/crc,
+    cis/cic), corrected inclination i0 + idot t_k, longitude of the ascending node
+    Omega0 + (OmegaDot - OmegaDot_e) t_k - OmegaDot_e toe, and the rotation into ECEF. The clock is
+    af0 + af1 dt + af2 dt^2 + F e sqrt(A) sin E_k with dt = t - toc (20.3.3.3.3.1). Times t_k and
+    dt are exact differences of absolute times, so week crossovers need no special care.
+
+    Parameters
+    ----------
+    eph : :attr:`GpsEphemerides.table`.
+    rows : row of ``eph`` per evaluation (e.g. from :func:`select_ephemeris`); must be >= 0.
+    time_us : GPS time, int64 microseconds; ``offset_s`` adds a float offset in seconds (for
+        the sub-microsecond transmission time of a pseudorange).
+    """
+    rows = np.asarray(rows, np.int64)
+    if (rows < 0).any():
+        raise ValueError("rows must be >= 0 (select_ephemeris gives -1 where no ephemeris qualifies)")
+    rows, time_us, offset = np.broadcast_arrays(
+        rows, np.asarray(time_us, np.int64), np.asarray(offset_s, float)
+    )
+    g = {c: eph[c].to_numpy()[rows] for c in ("e", "sqrt_a", "delta_n", "m0", "omega", "cuc", "cus", "crc",
+                                                "crs", "cic", "cis", "i0", "idot", "omega0", "omega_dot",
+                                                "toe", "af0", "af1", "af2", "tgd")}  # fmt: skip
+    toe_us = eph["toe_time"].dt.epoch("us").to_numpy()[rows]
+    toc_us = eph["toc"].dt.epoch("us").to_numpy()[rows]
+    tk = (time_us - toe_us) / US + offset
+    a = g["sqrt_a"] ** 2
+    n = np.sqrt(GPS_MU / a**3) + g["delta_n"]
+    mk = g["m0"] + n * tk
+    ek = _kepler(mk, g["e"])
+    sin_e, cos_e = np.sin(ek), np.cos(ek)
+    nu = np.arctan2(np.sqrt(1.0 - g["e"] ** 2) * sin_e, cos_e - g["e"])
+    phi = nu + g["omega"]
+    s2, c2 = np.sin(2 * phi), np.cos(2 * phi)
+    u = phi + g["cus"] * s2 + g["cuc"] * c2
+    r = a * (1.0 - g["e"] * cos_e) + g["crs"] * s2 + g["crc"] * c2
+    inc = g["i0"] + g["cis"] * s2 + g["cic"] * c2 + g["idot"] * tk
+    xp, yp = r * np.cos(u), r * np.sin(u)
+    big_omega = g["omega0"] + (g["omega_dot"] - GPS_OMEGA_E) * tk - GPS_OMEGA_E * g["toe"]
+    cos_o, sin_o, cos_i = np.cos(big_omega), np.sin(big_omega), np.cos(inc)
+    pos = np.stack(
+        [xp * cos_o - yp * cos_i * sin_o, xp * sin_o + yp * cos_i * cos_o, yp * np.sin(inc)], axis=-1
+    )
+    dt = (time_us - toc_us) / US + offset
+    rel = GPS_F * g["e"] * g["sqrt_a"] * sin_e
+    clock = g["af0"] + g["af1"] * dt + g["af2"] * dt**2 + rel
+    return BroadcastState(pos, clock, rel, g["tgd"], ek)
+
+
+def _kepler(m: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """Eccentric anomaly from Kepler's equation by Newton's method (quadratic convergence)."""
+    ek = m.copy()
+    for _ in range(20):
+        step = (ek - e * np.sin(ek) - m) / (1.0 - e * np.cos(ek))
+        ek -= step
+        if not np.any(np.abs(step) > 1e-14):
+            break
+    return ek
+
+
+def rotate_earth(position: np.ndarray, travel_time_s: np.ndarray | float) -> np.ndarray:
+    """ECEF position at transmission expressed in the ECEF frame of reception (Sagnac correction).
+
+    The Earth turns by theta = OmegaDot_e * tau during the signal travel time tau, so the frame
+    of reception is the frame of transmission rotated by theta about z:
+    x' = x cos(theta) + y sin(theta), y' = -x sin(theta) + y cos(theta), z' = z.
+    """
+    position = np.asarray(position, float)
+    theta = GPS_OMEGA_E * np.asarray(travel_time_s, float)
+    c, s = np.cos(theta), np.sin(theta)
+    x, y = position[..., 0], position[..., 1]
+    return np.stack([x * c + y * s, -x * s + y * c, position[..., 2]], axis=-1)
