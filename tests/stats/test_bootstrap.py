@@ -11,7 +11,9 @@ from scipy import stats
 from overbound.stats.bootstrap import (
     _fit_chunk,
     _stationary_counts,
+    bca_ci,
     bootstrap_gpd,
+    jackknife_gpd,
     p_exceed_ci,
     percentile_ci,
     stationary_indices,
@@ -208,3 +210,39 @@ def test_bootstrap_gpd_paired_sums_follow_the_resamples():
     assert np.corrcoef(b.paired_sums[:, 2], b.sigma)[0, 1] > 0.5
     with pytest.raises(ValueError, match="columns"):
         bootstrap_gpd(y, n_boot=5, rng=1, paired=np.ones((2, 10)))
+
+
+# --------------------------------------------------------------------------------------------------
+# BCa interval and the GPD jackknife
+
+
+@pytest.mark.parametrize("seed", [4, 5])
+def test_bca_ci_equals_scipy_bca_on_its_own_resamples(seed):
+    """Given scipy's bootstrap distribution and the jackknife, bca_ci reproduces scipy's BCa interval."""
+    x = np.random.default_rng(seed).exponential(1.0, 60)  # skewed: z0 and a are both non-zero
+    res = stats.bootstrap((x,), np.mean, method="BCa", n_resamples=4000, rng=np.random.default_rng(1))
+    jk = np.array([np.delete(x, i).mean() for i in range(x.size)])
+    lo, hi = bca_ci(res.bootstrap_distribution, x.mean(), jk, 0.95)
+    assert lo == pytest.approx(res.confidence_interval.low, rel=1e-12)
+    assert hi == pytest.approx(res.confidence_interval.high, rel=1e-12)
+    assert (lo, hi) != pytest.approx(percentile_ci(res.bootstrap_distribution, 0.95), rel=1e-6)
+
+
+def test_bca_ci_reduces_to_percentile_without_bias_and_skew():
+    s = np.random.default_rng(0).normal(size=2001)
+    med = float(np.median(s))
+    assert bca_ci(s, med, np.linspace(-1.0, 1.0, 41), 0.9) == pytest.approx(percentile_ci(s, 0.9), rel=1e-12)
+    # an estimate above most replicates (a downward-biased bootstrap) moves both ends up
+    lo, hi = bca_ci(s, float(np.quantile(s, 0.8)), np.linspace(-1.0, 1.0, 41), 0.9)
+    plo, phi = percentile_ci(s, 0.9)
+    assert lo > plo and hi > phi
+
+
+@pytest.mark.parametrize(("xi", "n"), [(-0.3, 80), (0.0, 120), (0.4, 60)])
+def test_jackknife_gpd_equals_leave_one_out_fits(xi, n):
+    y = stats.genpareto.rvs(xi, scale=1.0, size=n, random_state=np.random.default_rng(7))
+    jxi, jsig = jackknife_gpd(y)
+    for i in (0, n // 2, n - 1, int(np.argmax(y))):
+        f = fit_gpd(np.delete(y, i))
+        assert jxi[i] == pytest.approx(f.xi, abs=1e-7)
+        assert jsig[i] == pytest.approx(f.sigma, rel=1e-7)

@@ -28,7 +28,14 @@ from overbound.io.schema import InputError
 from overbound.methods.pooling import PooledEpochs, pool_epochs
 from overbound.report.json import dumps
 from overbound.services import K_H_PA, K_V_PA, SERVICES, ServiceLevel, parse_service
-from overbound.stats.bootstrap import bootstrap_gev, bootstrap_gpd, p_exceed_ci, percentile_ci
+from overbound.stats.bootstrap import (
+    bca_ci,
+    bootstrap_gev,
+    bootstrap_gpd,
+    jackknife_gpd,
+    p_exceed_ci,
+    percentile_ci,
+)
 from overbound.stats.dependence import (
     Clusters,
     autocorrelation,
@@ -127,6 +134,8 @@ EVT_EXTRA_KEYS = frozenset(
         "message",
         "threshold_method",
         "p_mi_profile_ci",
+        "p_mi_ci_bootstrap",
+        "p_mi_ci_bca",
         "cluster_size",
     }
 )
@@ -252,12 +261,12 @@ class TailFit:
     shape_ci_bootstrap : percentile bootstrap interval of the shape.
     zeta : exceedance rate per epoch :math:`n_u/N`.
     p : :math:`\hat P(>1)` per epoch; ``p_ci`` the union of its bootstrap percentile interval
-        (``p_ci_bootstrap``) and its profile-likelihood interval (``p_profile_ci``); ``p_95`` the
-        larger of the two one-sided upper bounds.
+        (``p_ci_bootstrap``), its BCa interval (``p_ci_bca``, declustered fits only) and its
+        profile-likelihood interval (``p_profile_ci``); ``p_95`` the upper end of ``p_ci``.
     cluster_rate : rate per epoch of clusters whose maximum exceeds 1 (MI events).
     cluster_size : mean cluster size near 1 (:class:`ClusterSize`).
-    p_approach, p_approach_ci, p_approach_95 : the same per approach (:func:`per_approach`); the
-        upper bound is again the larger of the bootstrap and profile ones.
+    p_approach, p_approach_ci, p_approach_95 : the same per approach (:func:`per_approach`, increasing
+        in ``p``: the interval and bound are those of ``p`` mapped through it).
     samples, samples_approach : bootstrap values of ``p`` and ``p_approach``.
     message : plain statement of anything special (finite endpoint, non-regular shape...).
     """
@@ -285,6 +294,7 @@ class TailFit:
     p_95: float = math.nan
     p_ci_bootstrap: tuple[float, float] = (math.nan, math.nan)
     p_profile_ci: tuple[float, float] = (math.nan, math.nan)
+    p_ci_bca: tuple[float, float] = (math.nan, math.nan)
     cluster_rate: float = math.nan
     cluster_size: ClusterSize | None = None
     p_approach: float = math.nan
@@ -622,9 +632,8 @@ def _tail_fit(
         factor = unit_rate * (size.mean if decluster else 1.0)
         lo, hi = profile_ci_exceedance(fit, 1.0, level=confidence)
         p_prof = (factor * lo, factor * hi)
-        p_prof_95 = factor * profile_ci_exceedance(fit, 1.0, level=2.0 * confidence - 1.0)[1]
     except (ValueError, RuntimeError):
-        p_prof, p_prof_95 = (math.nan, math.nan), math.nan
+        p_prof = (math.nan, math.nan)
     # bootstrap
     y = sample - u
     g_size, g_rate = g_rate.spawn(2)
@@ -640,6 +649,7 @@ def _tail_fit(
         k_star = g_rate.poisson(n_c, size=n_boot)
         gb = gpd_sf(1.0 - u, xi=boot.xi, sigma=boot.sigma)
         samples = k_star / n * gb * size_star
+        p_bca = bca_ci(samples, p, _jackknife_p(y, u, own, top, n_c, n, size.mean), confidence)
     else:
         idx = np.flatnonzero(x > u)
         mb_exc = max(1.0, n_exc / max(n_c, 1))
@@ -649,8 +659,11 @@ def _tail_fit(
             boot, x_excess=1.0 - u, n_total=n, level=confidence, rng=g_rate, positions=idx, mean_block=mb
         )
         samples = ci.samples
+        p_bca = (math.nan, math.nan)
     rates = samples / size_star
     samples_app = per_approach(samples, rates, exposure_n)
+    p_ci = _union(_union(percentile_ci(samples, confidence), p_bca), p_prof)
+    app_ci = per_approach(np.array(p_ci), np.array(p_ci) / size.mean, exposure_n)
     msgs_s = "; ".join(msgs)
     return TailFit(
         variable=variable,
@@ -672,26 +685,30 @@ def _tail_fit(
         shape_ci_bootstrap=percentile_ci(boot.xi, confidence),
         zeta=zeta,
         p=p,
-        p_ci=_union(percentile_ci(samples, confidence), p_prof),
-        p_95=float(np.nanmax([np.quantile(samples, confidence), p_prof_95])),
+        p_ci=p_ci,
+        p_95=p_ci[1],
         p_ci_bootstrap=percentile_ci(samples, confidence),
         p_profile_ci=p_prof,
+        p_ci_bca=p_bca,
         cluster_rate=rate,
         cluster_size=size,
         p_approach=p_app,
-        p_approach_ci=percentile_ci(samples_app, confidence),
-        p_approach_95=float(
-            np.nanmax(
-                [
-                    np.quantile(samples_app, confidence),
-                    per_approach(p_prof_95, p_prof_95 / size.mean, exposure_n),
-                ]
-            )
-        ),
+        p_approach_ci=(float(app_ci[0]), float(app_ci[1])),
+        p_approach_95=float(app_ci[1]),
         samples=samples,
         samples_approach=samples_app,
         message=msgs_s,
     )
+
+
+def _jackknife_p(
+    y: np.ndarray, u: float, own: np.ndarray, top: np.ndarray, n_c: int, n: int, size_mean: float
+) -> np.ndarray:
+    """Leave-one-cluster-out values of P_MI (GPD refit and cluster size near 1), for the BCa acceleration."""
+    xi, sig = jackknife_gpd(y)
+    n_top = top.sum() - top
+    size_j = np.where(n_top > 0, (own.sum() - own) / np.maximum(n_top, 1), size_mean)
+    return (n_c - 1) / n * gpd_sf(1.0 - u, xi=xi, sigma=sig) * size_j
 
 
 def _union(a: tuple[float, float], b: tuple[float, float]) -> tuple[float, float]:
@@ -865,10 +882,16 @@ def tail_analysis(
        campaigns, jointly 0.91); all exceedances: stationary bootstrap of the excesses (mean block = mean
        cluster size) and of the exceedance series (mean block :math:`\max(N^{1/3}, 2K_T/\Delta t)`).
        Profile-likelihood intervals of the shape and of :math:`\bar G(1-u)` (scaled like the
-       estimate). *Choice:* ``p_ci`` is the union of the bootstrap percentile and the profile
-       intervals, ``p_95`` the larger of the two one-sided upper bounds (the profile one is the
-       upper end of the two-sided :math:`2c-1` interval): each alone covered the truth in fewer
-       than 95 % of simulated campaigns when the fitted shape is negative.
+       estimate), and, declustered, the BCa interval (:func:`~overbound.stats.bootstrap.bca_ci`;
+       acceleration from the leave-one-cluster-out jackknife of :math:`\hat P_{MI}`, GPD refit and
+       :math:`\hat s` together). *Choice:* ``p_ci`` is the union of the percentile, BCa and profile
+       intervals and ``p_95`` (:math:`P_{MI95}`) its upper end, the issue's "upper bound" of the
+       interval. On 200 simulated 30-day campaigns (``validation/evt_coverage.py``) the percentile
+       interval alone covered the truth in 0.92 and the percentile-profile union in 0.93 (misses
+       one-sided: the truth above the interval, where the fitted shape is most negative, a bias the
+       percentile bootstrap reproduces instead of correcting); the union with BCa, whose
+       :math:`z_0` and acceleration move the upper end up exactly there, covered 0.95 with
+       :math:`P_{MI95}` at or above the truth in 0.96.
     8. **GEV** (section 4) on daily maxima; per epoch
        :math:`-\log(1 - \bar H(1))/(n_b\theta)` (since :math:`H = F^{n_b\theta}`); bootstrap of
        the block maxima (``gev_boot`` resamples).
@@ -1105,6 +1128,8 @@ def evt_dict(analysis: TailAnalysis) -> dict:
         "p_mi_ci": list(t.p_ci),
         "p_mi_95": t.p_95,
         "p_mi_profile_ci": list(t.p_profile_ci),
+        "p_mi_ci_bootstrap": list(t.p_ci_bootstrap),
+        "p_mi_ci_bca": list(t.p_ci_bca),
         "cluster_size": {
             "level": t.cluster_size.level,
             "mean": t.cluster_size.mean,

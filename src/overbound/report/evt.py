@@ -155,28 +155,29 @@ def _headline_rows(a: TailAnalysis, t: TailFit) -> list[list[str]]:
     else:
         how = f"automatic: {_e(choice.method)}; Anderson-Darling p-value {_h_x(choice.goodness_of_fit, 3)}"
     unit = "cluster maxima" if t.decluster else "all exceedances"
+    bca = f", the BCa interval {_h_ci(t.p_ci_bca)}" if math.isfinite(t.p_ci_bca[1]) else ""
     rows = [
         ["P<sub>MI</sub> per epoch", scientific(t.p), f"P(SI &gt; 1), SI = {_e(_SI[a.axis])}"],
         [
             f"{conf} interval",
             _h_ci(t.p_ci),
             f"union of the bootstrap percentile interval {_h_ci(t.p_ci_bootstrap)} ({a.n_boot:,} "
-            f"resamples) and the profile-likelihood interval {_h_ci(t.p_profile_ci)}",
+            f"resamples){bca} and the profile-likelihood interval {_h_ci(t.p_profile_ci)}",
         ],
         [
             "upper bound P<sub>MI95</sub>",
             scientific(t.p_95),
-            f"the larger of the one-sided {conf} bootstrap and profile-likelihood bounds",
+            f"the upper end of the {conf} interval",
         ],
         [
             f"P<sub>MI</sub> per approach ({APPROACH_S:g}&nbsp;s)",
             scientific(t.p_approach),
-            f"{n_app:g} epochs; bootstrap {conf} interval {_h_ci(t.p_approach_ci)}",
+            f"{n_app:g} epochs; {conf} interval {_h_ci(t.p_approach_ci)} (that of P<sub>MI</sub> mapped)",
         ],
         [
             "upper bound per approach",
             scientific(t.p_approach_95),
-            f"the larger of the one-sided {conf} bootstrap and profile-likelihood bounds",
+            f"the upper end of the {conf} interval per approach",
         ],
         [
             "MI epochs observed (SI &gt; 1)",
@@ -328,8 +329,9 @@ def _services_html(a: TailAnalysis) -> str:
     return (
         f"<p>HMI probability per service level (Veerman et al., section 3.6): {_e(variable)} on the "
         "epochs with PL &lt; AL, those in the time-to-alert before an alert dropped. The verdict "
-        f"compares the one-sided {_pct(a.confidence)} upper bound per exposure with the integrity "
-        "requirement.</p>" + _table(head, _service_rows(a), "evt-services")
+        "compares the upper bound per exposure (the upper end of the "
+        f"{_pct(a.confidence)} interval) with the integrity requirement.</p>"
+        + _table(head, _service_rows(a), "evt-services")
     )
 
 
