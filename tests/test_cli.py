@@ -15,6 +15,10 @@ from click.testing import CliRunner
 
 from overbound.cli import DEMO_POS, USLO_REFERENCE, main
 from overbound.io.geodesy import Reference, enu_errors_geodetic
+from overbound.methods.parametric import AXIS_KEYS as PAR_AXIS_KEYS
+from overbound.methods.parametric import SERVICE_KEYS as PAR_SERVICE_KEYS
+from overbound.methods.parametric import TOP_EXTRA_KEYS as PAR_TOP_EXTRA_KEYS
+from overbound.methods.parametric import TOP_KEYS as PAR_TOP_KEYS
 from overbound.methods.tail_extrapolation import EVT_EXTRA_KEYS, EVT_KEYS
 
 POS = Path(str(files("overbound.data") / DEMO_POS))
@@ -147,6 +151,7 @@ def test_simulate_and_demo(tmp_path):
     assert not math.isnan(sim_doc["services"]["LPV"]["continuity"]["combined"]["n_windows"])
     assert sim_doc["services"]["LPV"]["continuity"]["combined"]["n_windows"] > 10_000
     assert "index:" in res.output
+    assert (tmp_path / "demo" / "simulated" / "parametric.json").exists()
 
 
 def test_column_mapping_from_the_command_line(tmp_path):
@@ -331,3 +336,112 @@ def test_gh4_analyze_uslo_says_why_there_is_no_estimate(uslo_run, tmp_path):
         not list((tmp_path / "o").glob("evt*"))
         and "evt-vertical" not in (tmp_path / "o" / "report.html").read_text()
     )
+
+
+# --------------------------------------------------------------------------- parametric (issue 5)
+
+
+@pytest.fixture(scope="module")
+def quarter_day(tmp_path_factory):
+    """Six simulated hours at 1 Hz: every parametric figure has data, and the run is quick."""
+    path = tmp_path_factory.mktemp("parametric") / "q.parquet"
+    res = CliRunner().invoke(main, ["simulate", "-o", str(path), "--days", "0.25", "--seed", "3"])
+    assert res.exit_code == 0, res.output
+    return path
+
+
+def test_gh5_parametric_command_writes_the_issue_keys(quarter_day, tmp_path):
+    args = ["parametric", str(quarter_day), "-o", str(tmp_path), "--service", "LPV-200", "--service", "NPA",
+            "--decorrelation", "120", "--confidence", "0.9"]  # fmt: skip
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0, res.output
+    doc = json.loads((tmp_path / "parametric.json").read_text())
+    assert set(doc) == PAR_TOP_KEYS | PAR_TOP_EXTRA_KEYS and doc["schema"] == "overbound.parametric/1"
+    assert (doc["confidence"], doc["decorrelation"], doc["decorrelation_rule"]) == (0.9, 120.0, "given")
+    for axis, law in (("vertical", "normal"), ("horizontal", "rayleigh")):
+        a = doc[axis]
+        assert PAR_AXIS_KEYS <= set(a)
+        assert set(a["ratio_fit"]) == {"distribution", "mean", "sigma"}
+        assert a["ratio_fit"]["distribution"] == law
+        assert set(a["weibull"]) == {"a", "b"}
+        assert a["decorrelation_s"] == a["pl_decorrelation_s"] == 120.0
+        scale = 1.0 if axis == "vertical" else 2.0  # integral time scale of the Rayleigh's r^2: 2 tau
+        assert a["n_effective"] == pytest.approx(a["n_epochs"] * a["interval_s"] / (scale * 120.0))
+        assert 0 < a["p_mi"] < a["p_mi_bound"] < 1
+        for s in a["services"].values():
+            assert s is None or PAR_SERVICE_KEYS <= set(s)
+    assert list(doc["horizontal"]["services"]) == ["LPV-200", "NPA"]
+    assert doc["vertical"]["services"]["NPA"] is None  # no VAL
+    page = (tmp_path / "parametric.html").read_text()
+    assert '<section id="parametric-vertical">' in page and '<section id="parametric-horizontal">' in page
+    assert 'data-figure="parametric-horizontal-noncontinuity-3600"' in page
+    assert f"parametric: {tmp_path / 'parametric.json'}" in res.output
+    assert f"report: {tmp_path / 'parametric.html'}" in res.output
+    line = next(ln for ln in res.output.splitlines() if ln.startswith("parametric vertical: P_MI"))
+    assert "integrity/availability/continuity: LPV-200 " in line and "NPA" not in line
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "message"),
+    [
+        ("--decorrelation", "soon", "expected 'auto' or a number"),
+        ("--decorrelation", "0", "seconds above 0"),
+        ("--decorrelation", "nan", "expected 'auto' or a finite number"),
+        ("--confidence", "1", "not in the range 0<x<1"),
+    ],
+)
+def test_gh5_parametric_bad_option_is_a_usage_error(option, value, message, tmp_path):
+    res = CliRunner().invoke(
+        main, ["parametric", str(POS), "--reference", USLO_REFERENCE, "-o", str(tmp_path), option, value]
+    )
+    assert res.exit_code == 2
+    assert f"Invalid value for '{option}'" in res.output and message in res.output
+    assert not (tmp_path / "parametric.json").exists()
+
+
+def test_gh5_parametric_unknown_service_is_one_line(quarter_day, tmp_path):
+    res = CliRunner().invoke(main, ["parametric", str(quarter_day), "-o", str(tmp_path), "--service", "FOO"])
+    assert res.exit_code == 2 and res.output.startswith("error: unknown service 'FOO'")
+    assert res.output.count("\n") == 1 and not (tmp_path / "parametric.json").exists()
+
+
+def test_gh5_analyze_adds_the_parametric_section(uslo_run):
+    """The USLO day: P_MI below 1e-300 on both axes, kept by its log10; 30 s sampling: no 15 s window."""
+    out, doc, res = uslo_run
+    par = json.loads((out / "parametric.json").read_text())
+    for axis in ("vertical", "horizontal"):
+        brief = doc["parametric"][axis]
+        assert brief["p_mi"] == par[axis]["p_mi"] == 0.0 and brief["log10_p_mi"] < -300
+        assert brief["unavailable_reason"] is None
+        assert brief["services"]["APV-I"]["meets_continuity"] is None  # not countable at 30 s
+    assert doc["parametric"]["vertical"]["services"]["APV-I"]["unavailability_counted"] == pytest.approx(
+        1 - doc["services"]["APV-I"]["availability"]["vertical"]
+    )
+    page = (out / "report.html").read_text()
+    assert (
+        '<section id="parametric-vertical">' in page and "no 15 s continuity window could be counted" in page
+    )
+    assert re.search(r"parametric vertical: P_MI \d(\.\d+)?e-\d{3} per epoch", res.output)  # from log10
+
+
+def test_gh5_analyze_no_parametric_and_too_few_epochs(tmp_path):
+    csv = tmp_path / "rx.csv"
+    csv.write_text(
+        "time,station,hpe,vpe,hpl,vpl\n2024-01-07T00:00:00,A,1,2,12,18\n2024-01-07T00:00:01,A,1,2,12,18\n"
+    )
+    res = CliRunner().invoke(
+        main, ["analyze", str(csv), "-o", str(tmp_path / "a"), "--no-evt", "--service", "LPV"]
+    )
+    assert res.exit_code == 0, res.output
+    doc = json.loads((tmp_path / "a" / "parametric.json").read_text())
+    assert doc["vertical"] is None and "at least 10 needed" in doc["reasons"]["vertical"]
+    assert "No parametric estimate" in (tmp_path / "a" / "report.html").read_text()
+    assert "parametric vertical: no estimate" in res.output
+    res = CliRunner().invoke(
+        main,
+        ["analyze", str(csv), "-o", str(tmp_path / "b"), "--no-evt", "--no-parametric", "--service", "LPV"],
+    )
+    assert res.exit_code == 0, res.output
+    assert json.loads((tmp_path / "b" / "summary.json").read_text())["parametric"] == {}
+    assert not (tmp_path / "b" / "parametric.json").exists()
+    assert "parametric-vertical" not in (tmp_path / "b" / "report.html").read_text()

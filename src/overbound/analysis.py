@@ -18,6 +18,7 @@ from overbound.methods.counting import CountingResult, count_kpis
 from overbound.services import SERVICES, ServiceLevel, resolve_services
 
 if TYPE_CHECKING:  # a run-time import would be circular (tail_extrapolation -> report.json -> analysis)
+    from overbound.methods.parametric import ParametricAnalysis
     from overbound.methods.tail_extrapolation import TailAnalysis
 
 __all__ = ["Analysis", "Verdict", "analyze", "load_epochs", "verdicts"]
@@ -38,6 +39,8 @@ class Analysis:
     evt : the EVT tail extrapolations (Veerman et al., GIMAT), one per axis analysed.
     evt_failures : ``(axis, reason)`` of each axis whose EVT analysis could not run (e.g. too few
         tail values): no estimate there, and why.
+    parametric : the parametric availability, integrity and continuity analysis (Kannemans 2006) of
+        both axes, ``None`` when not run (an axis it could not analyse carries its reason).
     """
 
     table: pl.DataFrame
@@ -48,6 +51,7 @@ class Analysis:
     confidence: tuple[ConfidenceAnalysis, ...] = ()
     evt: tuple[TailAnalysis, ...] = ()
     evt_failures: tuple[tuple[str, str], ...] = ()
+    parametric: ParametricAnalysis | None = None
 
     @property
     def n_rejected(self) -> int:
@@ -118,6 +122,7 @@ def analyze(
     evt: Sequence[str] | None = (),
     evt_n_boot: int = 1000,
     evt_seed: int = 0,
+    parametric: bool = False,
     progress: Callable[[str], None] | None = None,
 ) -> Analysis:
     """Read ``inputs`` (or take an epoch table) and count the KPIs for each service.
@@ -139,6 +144,10 @@ def analyze(
     has horizontal solutions. An axis that cannot be analysed (too few tail values, no solution) is
     listed in ``Analysis.evt_failures`` with the reason instead of failing the analysis. Pass
     ``"alert"`` in ``columns`` so that alerted epochs are excluded.
+    ``parametric`` runs the parametric analysis of Kannemans (2006)
+    (:func:`~overbound.methods.parametric.parametric_analysis` with its defaults: decorrelation times
+    from the ACF, 95 % bounds, ``services``) on both axes; an axis it cannot analyse carries its
+    reason in ``Analysis.parametric.reasons``.
     """
     if isinstance(inputs, pl.DataFrame):
         table, reports = validate_epochs(inputs), ()
@@ -166,7 +175,14 @@ def analyze(
     cl = tuple(confidence_analysis(table, axis=a) for a in axes)
     evt_axes = _evt_axes(table) if evt is None else tuple(dict.fromkeys(evt))
     done, failed = _run_evt(table, evt_axes, levels, evt_n_boot, evt_seed, progress)
-    return Analysis(table, reports, levels, counting, label, cl, done, failed)
+    par = None
+    if parametric:
+        from overbound.methods.parametric import parametric_analysis
+
+        if progress:
+            progress("parametric analysis")
+        par = parametric_analysis(table, services=levels)
+    return Analysis(table, reports, levels, counting, label, cl, done, failed, par)
 
 
 def _confidence_axes(table: pl.DataFrame) -> tuple[str, ...]:

@@ -169,7 +169,14 @@ def _read_options(reference, reference_ecef, fmt, station, strict, start, end, c
     help="Add the EVT tail extrapolation of P_MI and P_HMI (vertical; horizontal too with HPL): "
     "OUTPUT/evt-<axis>.json.",
 )
-def analyze(inputs, out_dir, services, epochs_out, confidence, evt, **inputs_opts) -> None:
+@click.option(
+    "--parametric/--no-parametric",
+    default=True,
+    show_default=True,
+    help="Add the parametric availability, integrity and continuity (Kannemans 2006) of both axes: "
+    "OUTPUT/parametric.json.",
+)
+def analyze(inputs, out_dir, services, epochs_out, confidence, evt, parametric, **inputs_opts) -> None:
     """Analyse receiver output INPUTS: write OUTPUT/summary.json and OUTPUT/report.html."""
     paths = _run_analysis(
         list(inputs),
@@ -178,6 +185,7 @@ def analyze(inputs, out_dir, services, epochs_out, confidence, evt, **inputs_opt
         epochs_out=epochs_out,
         confidence=confidence,
         evt=evt,
+        parametric=parametric,
         **_read_options(**inputs_opts),
     )
     click.echo(f"report: {paths[1]}")
@@ -185,23 +193,35 @@ def analyze(inputs, out_dir, services, epochs_out, confidence, evt, **inputs_opt
 
 
 def _run_analysis(
-    inputs, out_dir: Path, *, services=(), epochs_out=None, title=None, confidence=True, evt=True, **read_opts
+    inputs,
+    out_dir: Path,
+    *,
+    services=(),
+    epochs_out=None,
+    title=None,
+    confidence=True,
+    evt=True,
+    parametric=True,
+    **read_opts,
 ):
     """Analyse, write summary.json and report.html (and the epoch table); return their paths."""
     from overbound.analysis import analyze as run
     from overbound.io.table import write_epochs
+    from overbound.methods.parametric import write_parametric
     from overbound.methods.tail_extrapolation import write_evt
     from overbound.report.confidence import json_name, write_confidence
     from overbound.report.evt import json_name as evt_json_name
     from overbound.report.html import write_report
     from overbound.report.json import summary_dict, write_summary
+    from overbound.report.parametric import JSON_NAME as PARAMETRIC_JSON
 
     if epochs_out:
         columns = None  # the epoch table written keeps every column
     else:
-        columns = (("east", "north") if confidence else ()) + (("alert",) if confidence or evt else ())
+        alert = confidence or evt or parametric
+        columns = (("east", "north") if confidence else ()) + (("alert",) if alert else ())
     with _progress() as bar:
-        task = bar.add_task("reading", total=len(inputs) + 4 + 2 * evt)
+        task = bar.add_task("reading", total=len(inputs) + 4 + 2 * evt + parametric)
 
         def step(what: str) -> None:
             bar.update(task, description=f"{what}", advance=1)
@@ -214,6 +234,7 @@ def _run_analysis(
             columns=columns,
             confidence=None if confidence else (),
             evt=None if evt else (),
+            parametric=parametric,
             progress=step,
         )
         out_dir.mkdir(parents=True, exist_ok=True)
@@ -221,6 +242,8 @@ def _run_analysis(
             write_confidence(c, out_dir / json_name(c.axis))
         for e in result.evt:
             write_evt(e, out_dir / evt_json_name(e.axis))
+        if result.parametric is not None:
+            write_parametric(result.parametric, out_dir / PARAMETRIC_JSON)
         step("writing summary.json")
         summary = write_summary(result, out_dir / "summary.json")
         step("drawing report.html")
@@ -267,6 +290,38 @@ def _print_summary(result) -> None:
         console.print(_evt_line(e), highlight=False, soft_wrap=True)
     for axis, reason in result.evt_failures:
         console.print(f"EVT {axis}: no estimate: {reason}", highlight=False, soft_wrap=True)
+    if result.parametric is not None:
+        for line in _parametric_lines(result.parametric):
+            console.print(line, highlight=False, soft_wrap=True)
+
+
+_VERDICT_KEYS = ("integrity", "availability", "continuity")
+
+
+def _parametric_lines(analysis) -> list[str]:
+    """One line per axis: P_MI, its bound and each service's integrity/availability/continuity verdicts."""
+    from overbound.report.parametric import service_verdicts
+    from overbound.report.parametric_figures import format_probability as fp
+
+    word = {True: "ok", False: "FAIL", None: "n.a."}
+    levels = {s.name: s for s in analysis.services}
+    lines = []
+    for axis in ("vertical", "horizontal"):
+        a = analysis.axis(axis)
+        if a is None:
+            lines.append(f"parametric {axis}: no estimate: {analysis.reasons.get(axis, 'not analysed')}")
+            continue
+        verdicts = []
+        for name, s in a.services.items():
+            if s is not None:
+                v = service_verdicts(a, levels[name])
+                verdicts.append(f"{name} " + "/".join(word[v[k]] for k in _VERDICT_KEYS))
+        lines.append(
+            f"parametric {axis}: P_MI {fp(a.p_mi, a.log10_p_mi)} per epoch, bound "
+            f"{fp(a.p_mi_bound, a.log10_p_mi_bound)}; integrity/availability/continuity: "
+            + (", ".join(verdicts) or "no service")
+        )
+    return lines
 
 
 def _evt_line(a) -> str:
@@ -491,8 +546,9 @@ def _auto_or_float(*, below: float | None = None, minimum: float | None = None):
             or (below is not None and x >= below)
             or (minimum is not None and x < minimum)
         ):
-            bounds = f"below {below:g}" if below is not None else f"at least {minimum:g}"
-            raise click.BadParameter(f"{value!r}: expected 'auto' or a finite number {bounds}")
+            bounds = f" below {below:g}" if below is not None else ""
+            bounds += f" at least {minimum:g}" if minimum is not None else ""
+            raise click.BadParameter(f"{value!r}: expected 'auto' or a finite number{bounds}")
         return x
 
     return convert
@@ -584,6 +640,68 @@ def evt(
         )
     console.print(_evt_line(run.analysis), highlight=False, soft_wrap=True)
     click.echo(f"evt: {run.json_path}")
+    click.echo(f"report: {run.report}")
+
+
+def _decorrelation_option(ctx, param, value: str) -> str | float:
+    """``auto`` or seconds > 0 (a click callback; a bad value is a usage error naming the option)."""
+    x = _auto_or_float()(ctx, param, value)
+    if x != "auto" and not x > 0:
+        raise click.BadParameter(f"{value!r}: expected 'auto' or a finite number of seconds above 0")
+    return x
+
+
+@main.command()
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "-o",
+    "--output",
+    "out_dir",
+    required=True,
+    type=click.Path(file_okay=False, path_type=Path),
+    help="Output directory for parametric.json and parametric.html.",
+)
+@click.option(
+    "--service",
+    "services",
+    multiple=True,
+    metavar="NAME|NAME:HAL:VAL",
+    help="Service level (repeatable); default: all of NPA, APV-I, APV-II, LPV, LPV-200, CAT-I.",
+)
+@click.option(
+    "--decorrelation",
+    default="auto",
+    show_default=True,
+    metavar="auto|SECONDS",
+    callback=_decorrelation_option,
+    help="Decorrelation time of the ratio and of the PL (s), or read from each ACF (first lag below 1/e).",
+)
+@click.option(
+    "--confidence",
+    default=0.95,
+    show_default=True,
+    type=click.FloatRange(0, 1, min_open=True, max_open=True),
+    help="One-sided confidence level of the bounds.",
+)
+@_with_input_options
+def parametric(inputs, out_dir, services, decorrelation, confidence, **inputs_opts) -> None:
+    """Parametric integrity, availability and continuity (Kannemans 2006): OUTPUT/parametric.json, .html."""
+    from overbound.analysis import load_epochs
+    from overbound.report.parametric import run_parametric
+
+    with _progress() as bar:
+        bar.add_task("parametric availability, integrity and continuity", total=None)
+        table, _ = load_epochs(list(inputs), columns=("alert",), **_read_options(**inputs_opts))
+        run = run_parametric(
+            table,
+            out_dir,
+            services=list(services) or None,
+            decorrelation=decorrelation,
+            confidence=confidence,
+        )
+    for line in _parametric_lines(run.analysis):
+        console.print(line, highlight=False, soft_wrap=True)
+    click.echo(f"parametric: {run.json_path}")
     click.echo(f"report: {run.report}")
 
 

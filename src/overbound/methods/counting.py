@@ -18,7 +18,7 @@ import polars as pl
 
 from overbound.io.schema import as_numpy
 from overbound.services import ServiceLevel
-from overbound.stats.dependence import nominal_interval_us
+from overbound.stats.dependence import SlotGrid, prefix_counts, slot_grid
 
 __all__ = [
     "AXES",
@@ -352,45 +352,6 @@ def _iso(us: int) -> str:
 # continuity
 
 
-@dataclass(frozen=True, slots=True)
-class _Grid:
-    """Epochs of one station placed on a regular time grid."""
-
-    index: np.ndarray  # grid index of each epoch
-    size: int
-    interval_s: float
-    n_off_grid: int
-    gap_prefix: np.ndarray  # gap_prefix[k] = empty grid slots before slot k
-
-
-def _grid(time_us: np.ndarray) -> _Grid | None:
-    dt = nominal_interval_us(time_us)
-    if dt is None:
-        return None
-    # nearest grid slot, in integers and in place (no float temporaries of the whole series)
-    k = time_us - (time_us[0] - dt // 2)
-    k //= dt
-    resid = k * dt
-    np.subtract(time_us, resid, out=resid)
-    resid -= time_us[0]
-    np.abs(resid, out=resid)
-    off = int(np.count_nonzero(resid > dt // 4))
-    del resid
-    size = int(k[-1]) + 1
-    empty = np.ones(size, dtype=bool)
-    empty[k] = False
-    return _Grid(k, size, dt / 1e6, off, _prefix(empty))
-
-
-def _prefix(flags: np.ndarray) -> np.ndarray:
-    """``out[k]`` = number of set flags before ``k``; int32 while it fits (halves memory)."""
-    dtype = np.int32 if flags.size < 2**31 - 1 else np.int64
-    out = np.empty(flags.size + 1, dtype=dtype)
-    out[0] = 0
-    np.cumsum(flags, dtype=dtype, out=out[1:])
-    return out
-
-
 def continuity_risk(time_us: np.ndarray, available: np.ndarray, *, window_s: float) -> ContinuityResult:
     """Loss-of-continuity share of sliding windows, counted in time (Kannemans 2006, 2.1.4).
 
@@ -417,10 +378,10 @@ def continuity_risk(time_us: np.ndarray, available: np.ndarray, *, window_s: flo
     3. Windows that would run past the last epoch are not counted (``n_truncated``).
     4. When Δ > T no window holds a sample, and ``risk`` is ``None`` with the reason.
     """
-    return _continuity_on_grid(_grid(np.asarray(time_us, dtype=np.int64)), available, window_s)
+    return _continuity_on_grid(slot_grid(np.asarray(time_us, dtype=np.int64)), available, window_s)
 
 
-def _continuity_on_grid(grid: _Grid | None, available: np.ndarray, window_s: float) -> ContinuityResult:
+def _continuity_on_grid(grid: SlotGrid | None, available: np.ndarray, window_s: float) -> ContinuityResult:
     if grid is None:
         return ContinuityResult(None, 0, 0, 0, 0, window_s, None, 0, "fewer than two epochs")
     if grid.interval_s > window_s:
@@ -429,7 +390,7 @@ def _continuity_on_grid(grid: _Grid | None, available: np.ndarray, window_s: flo
     w = max(1, round(window_s / grid.interval_s))
     up = np.zeros(grid.size, dtype=bool)  # slot holds an available epoch
     up[grid.index] = available
-    lost_prefix = _prefix(~up)  # a slot is lost when it is a gap or unavailable
+    lost_prefix = prefix_counts(~up)  # a slot is lost when it is a gap or unavailable
     # Windows start at slots 0..K-1 (their w following slots exist); events in slots
     # (k, k+w] = prefix[k+w+1] - prefix[k+1], taken as contiguous slices, not gathers.
     k_max = max(grid.size - w, 0)
@@ -523,7 +484,7 @@ def count_kpis(
     ok = np.isfinite(hpe) & np.isfinite(vpe) & np.isfinite(hpl) & np.isfinite(vpl)
     pe = {"horizontal": hpe, "vertical": vpe}
     pls = {"horizontal": hpl, "vertical": vpl}
-    counter = _Counter(pe, pls, [(idx, _grid(time_us[idx])) for idx in stations.values()])
+    counter = _Counter(pe, pls, [(idx, slot_grid(time_us[idx])) for idx in stations.values()])
     out_services = {s.name: counter.service(s) for s in services}
     hist = {}
     for s in services:
@@ -586,7 +547,7 @@ class _Counter:
 
     pe: dict[str, np.ndarray]
     pls: dict[str, np.ndarray]
-    grids: list[tuple[np.ndarray | slice, _Grid | None]]
+    grids: list[tuple[np.ndarray | slice, SlotGrid | None]]
 
     def __post_init__(self) -> None:
         self._cache: dict[tuple, ContinuityResult] = {}

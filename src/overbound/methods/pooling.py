@@ -53,12 +53,31 @@ class PooledEpochs:
 
 
 def _interval_us(t: np.ndarray, codes: np.ndarray) -> int:
-    """Mean of the spacings within 25 % of the median spacing (gaps out, jitter averaged)."""
+    """Mean of the spacings within 25 % of the median spacing (gaps out, jitter averaged).
+
+    The median only sets the ±25 % window, so it is taken over at most ~1e5 evenly strided spacings
+    (months of 1 Hz data hold millions); the mean is over all spacings in the window.
+    """
     steps = np.diff(t)[np.diff(codes) == 0]
     steps = steps[steps > 0]
-    med = float(np.median(steps)) if steps.size else 1e6
+    stride = max(1, steps.size // 100_000)
+    med = float(np.median(steps[::stride])) if steps.size else 1e6
     near = steps[np.abs(steps - med) <= med / 4] if steps.size else steps
     return max(1, round(float(near.mean()))) if near.size else max(1, round(med))
+
+
+def _station_codes(station: pl.Series) -> np.ndarray:
+    """Integer code per row; all zeros for one station without the cost of a categorical cast."""
+    first = station[0]
+    if first is not None and bool((station == first).all()):
+        return np.zeros(station.len(), dtype=np.int64)
+    return as_numpy(station.cast(pl.String).cast(pl.Categorical).to_physical()).astype(np.int64)
+
+
+def _sorted(t: np.ndarray, codes: np.ndarray) -> bool:
+    """Rows already grouped by station in increasing code and in time order within each."""
+    dc = np.diff(codes)
+    return bool(np.all(dc >= 0) and np.all((np.diff(t) > 0) | (dc > 0)))
 
 
 def pool_epochs(table: pl.DataFrame, axis: str, *, signed: bool = False) -> PooledEpochs:
@@ -81,15 +100,18 @@ def pool_epochs(table: pl.DataFrame, axis: str, *, signed: bool = False) -> Pool
     pe = pe if signed else np.abs(pe)
     pls = as_numpy(table[pl_col]).astype(np.float64, copy=False)
     t = as_numpy(table["time"]).astype(np.int64, copy=False)
-    codes = as_numpy(table["station"].cast(pl.String).cast(pl.Categorical).to_physical()).astype(np.int64)
+    codes = _station_codes(table["station"])
     alert = (
         as_numpy(table["alert"].fill_null(False)).astype(bool)
         if "alert" in table.columns
         else np.zeros(t.size, dtype=bool)
     )
     ok = np.isfinite(pe) & np.isfinite(pls) & (pls > 0)
-    order = np.lexsort((t, codes))
-    order = order[ok[order]]
+    if _sorted(t, codes):  # the usual case (one station, in time order): no sort, one gather
+        order = np.flatnonzero(ok)
+    else:
+        order = np.lexsort((t, codes))
+        order = order[ok[order]]
     t, codes, pe, pls, alert = t[order], codes[order], pe[order], pls[order], alert[order]
     if t.size == 0:
         raise InputError("<epoch table>", "no epoch with a solution")

@@ -9,7 +9,8 @@ metadata.
 Sections (each a ``<section id=...>`` with an ``<h2>``): ``overview``, ``accuracy``,
 ``stations`` (only for several stations), one ``service-<name>`` per service level,
 one ``confidence-<axis>`` per PL confidence-level axis, one ``evt-<axis>`` per EVT axis (an axis
-that could not be analysed says why), ``time-series``, ``method-notes`` and ``summary-data`` (the
+that could not be analysed says why), ``parametric-vertical`` and ``parametric-horizontal`` when the
+parametric analysis ran, ``time-series``, ``method-notes`` and ``summary-data`` (the
 ``summary.json`` document, folded).
 """
 
@@ -44,6 +45,8 @@ from overbound.report.figures import (
 )
 from overbound.report.json import dumps, summary_dict
 from overbound.report.page import PAGE_CSS, escape, figure_html, scientific
+from overbound.report.parametric import parametric_section_html
+from overbound.report.parametric import section_ids as parametric_ids
 from overbound.services import ServiceLevel
 
 __all__ = ["REPORT_NAME", "render_report", "section_ids", "write_report"]
@@ -92,6 +95,7 @@ def section_ids(analysis: Analysis) -> tuple[str, ...]:
         *(_service_id(s) for s in analysis.services),
         *(f"confidence-{c.axis}" for c in analysis.confidence),
         *(f"evt-{axis}" for axis, _ in _evt_items(analysis)),
+        *(parametric_ids() if analysis.parametric is not None else ()),
         "time-series",
         "method-notes",
         "summary-data",
@@ -110,6 +114,11 @@ def render_report(analysis: Analysis, *, summary: dict | None = None) -> str:
         *(_service(analysis, s) for s in analysis.services),
         *(confidence_section_html(c) for c in analysis.confidence),
         *(_evt_section(analysis, axis, item) for axis, item in _evt_items(analysis)),
+        *(
+            (parametric_section_html(analysis.parametric, analysis.table, timeseries=False),)
+            if analysis.parametric is not None
+            else ()
+        ),
         _time_series(analysis),
         _method_notes(c),
         _section(
@@ -213,6 +222,10 @@ def _header(a: Analysis) -> str:
             *((_service_id(s), s.name) for s in a.services),
             *((f"confidence-{c.axis}", f"{c.axis.capitalize()} PL confidence") for c in a.confidence),
             *((f"evt-{axis}", f"{axis.capitalize()} EVT") for axis, _ in _evt_items(a)),
+            *(
+                (sid, f"{sid.removeprefix('parametric-').capitalize()} parametric")
+                for sid in (parametric_ids() if a.parametric is not None else ())
+            ),
             ("time-series", "Time series"),
             ("method-notes", "Method notes"),
             ("summary-data", "Summary data"),

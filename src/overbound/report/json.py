@@ -8,7 +8,10 @@ several stations (empty otherwise); ``confidence`` the PL confidence level of ea
 analysed in brief (bins rated, the suspect bands with a confidence below 1 %, the worst band);
 ``evt`` the EVT tail extrapolation of each axis analysed in brief (P_MI, its upper bound, the upper
 bound per approach, each service's verdict and the message; ``null`` numbers and the reason as
-message when the axis could not be analysed); the full documents are ``evt-<axis>.json``.
+message when the axis could not be analysed); the full documents are ``evt-<axis>.json``;
+``parametric`` the parametric analysis (Kannemans 2006) in brief
+(:func:`overbound.report.parametric.parametric_brief`; ``{}`` when not run), the full document
+being ``parametric.json``.
 """
 
 from __future__ import annotations
@@ -144,7 +147,17 @@ def summary_dict(analysis: Analysis) -> dict:
         "stations": {name: _station_dict(sc, analysis.services) for name, sc in c.by_station.items()},
         "confidence": {a.axis: _confidence_brief(a) for a in analysis.confidence},
         "evt": _evt_briefs(analysis),
+        "parametric": _parametric_brief(analysis),
     }
+
+
+def _parametric_brief(analysis: Analysis) -> dict:
+    """The parametric analysis in a few numbers per axis; ``{}`` when it was not run."""
+    if analysis.parametric is None:
+        return {}
+    from overbound.report.parametric import parametric_brief  # lazy: it draws with matplotlib
+
+    return parametric_brief(analysis.parametric)
 
 
 def _confidence_brief(a) -> dict:

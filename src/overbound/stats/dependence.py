@@ -24,6 +24,7 @@ import scipy.signal
 __all__ = [
     "Clusters",
     "RegularSeries",
+    "SlotGrid",
     "VKCurve",
     "autocorrelation",
     "cluster_gap",
@@ -33,8 +34,10 @@ __all__ = [
     "extremal_index",
     "extremal_index_runs",
     "nominal_interval_us",
+    "prefix_counts",
     "regular_series",
     "select_spaced",
+    "slot_grid",
     "vk_curve",
 ]
 
@@ -451,6 +454,50 @@ def decorrelation_time(
         k0 = int(hit[0]) if hit.size else rho.size
         return float(interval_s * (1.0 + 2.0 * np.nansum(rho[1:k0])))
     return float(hit[0] * interval_s) if hit.size else float("inf")
+
+
+@dataclass(frozen=True, slots=True)
+class SlotGrid:
+    """Epochs of one station placed on a regular time grid (the continuity count's grid rule)."""
+
+    index: np.ndarray  # grid index of each epoch
+    size: int
+    interval_s: float
+    n_off_grid: int
+    gap_prefix: np.ndarray  # gap_prefix[k] = empty grid slots before slot k
+
+
+def slot_grid(time_us: np.ndarray) -> SlotGrid | None:
+    """Nearest slot of each epoch on the grid of :func:`nominal_interval_us`; ``None`` below two epochs.
+
+    ``n_off_grid`` counts epochs more than a quarter interval off their slot; ``gap_prefix[k]`` the
+    empty slots before slot ``k``.
+    """
+    dt = nominal_interval_us(time_us)
+    if dt is None:
+        return None
+    # nearest grid slot, in integers and in place (no float temporaries of the whole series)
+    k = time_us - (time_us[0] - dt // 2)
+    k //= dt
+    resid = k * dt
+    np.subtract(time_us, resid, out=resid)
+    resid -= time_us[0]
+    np.abs(resid, out=resid)
+    off = int(np.count_nonzero(resid > dt // 4))
+    del resid
+    size = int(k[-1]) + 1
+    empty = np.ones(size, dtype=bool)
+    empty[k] = False
+    return SlotGrid(k, size, dt / 1e6, off, prefix_counts(empty))
+
+
+def prefix_counts(flags: np.ndarray) -> np.ndarray:
+    """``out[k]`` = number of set flags before ``k``; int32 while it fits (halves memory)."""
+    dtype = np.int32 if flags.size < 2**31 - 1 else np.int64
+    out = np.empty(flags.size + 1, dtype=dtype)
+    out[0] = 0
+    np.cumsum(flags, dtype=dtype, out=out[1:])
+    return out
 
 
 # --------------------------------------------------------------------------------------------------
