@@ -1,0 +1,612 @@
+"""DO-229 SBAS user engine core: corrected ranges, variances, position errors and protection levels.
+
+:func:`run_sbas` takes GPS L1 C/A pseudoranges (a RINEX observation table), the broadcast
+ephemerides and the decoded SBAS messages of one GEO, and returns the epoch table of
+:mod:`overbound.io.schema` and a per-satellite table with every correction and sigma term, the
+post-fit residual and, for a satellite that was not used, why (``reason``).
+
+Everything is computed per (epoch, satellite) row, vectorised over all rows at once: message
+state is found by as-of look-ups (:mod:`overbound.sbas.corrections`), the grid ionosphere by
+:mod:`overbound.sbas.iono`, the troposphere by :mod:`overbound.sbas.tropo`, the solution by a
+batched weighted least squares (:mod:`overbound.sbas.solution`).
+
+What is modelled (DO-229D appendix A and J; the time model is that of
+:mod:`overbound.sbas.corrections`):
+
+* fast corrections (MT 2-5, 24) with their UDREI, MT 6 integrity (IODF matching, alarm IODF 3),
+  range-rate correction RRC from the last two PRCs of the satellite (A.4.4.3), applied as
+  PRC + RRC (t - t_of); PRC time-out from the MT 7 indicator (Table A-8), RRC time-outs (the PRCs
+  more than the smallest time-out of the mask apart, or propagated beyond 8 times their spacing);
+  fast-correction history restarts after 4 or more missing messages and after a UDREI 14/15;
+* long-term corrections (MT 25, velocity codes 0 and 1) matched to the broadcast ephemeris by IODE;
+* degradation (A.4.5.1): eps_fc = a_i (t - t_u + t_lat)^2 / 2, eps_rrc (0 for IODFs in sequence,
+  else (a_i I_fc / 4 + B_rrc / dt) (t - t_of)), eps_ltc (velocity code 0:
+  C_ltc_v0 floor((t - t_ltc) / I_ltc_v0); code 1: C_ltc_lsb + C_ltc_v1 max(0, t_0 - t, t - t_0 -
+  I_ltc_v1) outside the validity interval), eps_er = 0 (PA); sigma_flt with the MT 10 RSS_UDRE
+  flag and the MT 27 delta-UDRE (square regions; 1 when neither MT 27 nor MT 28 is received);
+* the grid ionosphere with sigma_UIVE from GIVE and eps_iono (C_iono_step floor((t - t_iono) /
+  I_iono) + C_iono_ramp (t - t_iono), RSS_iono), sigma_UIRE = F_pp sigma_UIVE;
+* MOPS troposphere and sigma_tropo; sigma_air of airborne accuracy designator A (DO-229D J.2.4:
+  sigma_noise = 0.36 m, or 0.15 m for AAD-B, sigma_multipath = 0.13 + 0.53 exp(-E / 10 deg),
+  sigma_divg = 0 for unsmoothed code), i.e. gLAB's class 2 receiver;
+* PA (default) or NPA protection levels, elevation mask 5 deg.
+
+Satellites are not used, with the first reason in this order: ``no_pseudorange``,
+``messages_lost`` (4 or more consecutive missing messages at the epoch), ``no_mask``,
+``mask_timeout``, ``not_in_mask``, ``no_mt10``, ``mt10_timeout``, ``no_fast_correction``,
+``udre_timeout``, ``not_monitored`` (UDREI 14), ``do_not_use`` (UDREI 15), ``udrei_pa`` (UDREI >= 12
+in PA), ``no_mt7``, ``mt7_timeout``, ``prc_timeout``, ``single_prc``, ``rrc_timeout``,
+``rrc_propagation``, ``no_long_term``, ``long_term_timeout``, ``no_ephemeris_iode``,
+``elevation``, ``iono_mask_timeout``, ``no_iono``. In NPA the checks marked PA-only above make a
+satellite lose the correction instead (not yet: NPA currently applies the PA checks; see README).
+
+Not handled yet: MT 28 covariance (delta-UDRE is 1 when MT 28 is present), MT 27 triangles,
+GEO ranging, pierce points poleward of 75 deg, the previous-mask (old IODP/IODI) fall-backs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import polars as pl
+import pymap3d
+
+from overbound.io.rinex_nav import SPEED_OF_LIGHT, broadcast_state, rotate_earth
+from overbound.sbas import iono as ionomod
+from overbound.sbas.corrections import US, asof, previous_same_key, segments, times_us
+from overbound.sbas.messages import FC_TIMEOUT_NPA, FC_TIMEOUT_PA, SbasMessages
+from overbound.sbas.solution import K_H_NPA, K_H_PA, K_V_PA, weighted_least_squares
+from overbound.sbas.tropo import mops_tropo
+
+__all__ = ["REASONS", "SbasOptions", "SbasResult", "run_sbas"]
+
+C = SPEED_OF_LIGHT
+
+#: Reasons for not using a satellite, in the order they are checked (0 = used).
+REASONS = (
+    "used", "no_pseudorange", "messages_lost", "no_mask", "mask_timeout", "not_in_mask", "no_mt10",
+    "mt10_timeout", "no_fast_correction", "udre_timeout", "not_monitored", "do_not_use", "udrei_pa",
+    "no_mt7", "mt7_timeout", "prc_timeout", "single_prc", "rrc_timeout", "rrc_propagation",
+    "no_long_term", "long_term_timeout", "no_ephemeris_iode", "elevation", "iono_mask_timeout", "no_iono",
+    "too_few_satellites",
+)  # fmt: skip
+
+#: Message time-outs (s) for PA and NPA (DO-229D Table A-25), by message type.
+TIMEOUT_PA = {1: 600, 6: 12, 7: 240, 10: 240, 18: 1200, 25: 240, 26: 600, 27: 86400}
+TIMEOUT_NPA = {1: 600, 6: 18, 7: 360, 10: 360, 18: 1200, 25: 360, 26: 600, 27: 86400}
+
+
+@dataclass(frozen=True, slots=True)
+class SbasOptions:
+    """Engine options.
+
+    Attributes
+    ----------
+    mode : ``"PA"`` or ``"NPA"`` (protection-level factors and time-outs).
+    mask_deg : elevation mask.
+    geo : PRN of the GEO whose messages are used (None: the only one present).
+    flight_time : GEO signal flight time (s) added to message tags (gLAB's default 0.12 s).
+    aad : airborne accuracy designator, ``"A"`` (sigma_noise 0.36 m) or ``"B"`` (0.15 m).
+    """
+
+    mode: str = "PA"
+    mask_deg: float = 5.0
+    geo: int | None = None
+    flight_time: float = 0.12
+    aad: str = "A"
+
+    def __post_init__(self) -> None:
+        if self.mode not in ("PA", "NPA"):
+            raise ValueError(f"mode {self.mode!r}: expected PA or NPA")
+        if self.aad not in ("A", "B"):
+            raise ValueError(f"aad {self.aad!r}: expected A or B")
+
+
+@dataclass(frozen=True, slots=True)
+class SbasResult:
+    """``epochs``: the epoch table (overbound.io.schema); ``satellites``: one row per observation."""
+
+    epochs: pl.DataFrame
+    satellites: pl.DataFrame
+    counts: dict[str, object] = field(default_factory=dict)
+
+
+def run_sbas(
+    obs: pl.DataFrame,
+    eph: pl.DataFrame,
+    msgs: SbasMessages,
+    reference_ecef: tuple[float, float, float],
+    *,
+    station: str = "",
+    options: SbasOptions | None = None,
+) -> SbasResult:
+    """Process every epoch of ``obs`` (RINEX table with ``time``, ``system``, ``prn``, ``C1C``).
+
+    ``eph`` is :attr:`overbound.io.rinex_nav.GpsEphemerides.table`; the linearisation point,
+    elevation and pierce points use ``reference_ecef`` (the errors are against it too).
+    """
+    opt = options or SbasOptions()
+    obs = obs.filter(pl.col("system") == "G").sort("time", "prn")
+    t = times_us(obs["time"])
+    prn = obs["prn"].to_numpy().astype(np.int64)
+    pr = obs["C1C"].to_numpy().astype(float)
+    epochs_us, epoch = np.unique(t, return_inverse=True)
+    m = _select_geo(msgs, opt.geo)
+    rx = np.asarray(reference_ecef, float)
+    lat, lon, h = (float(v) for v in pymap3d.ecef2geodetic(*rx))
+    ctx = _Context(t=t, prn=prn, opt=opt, base=int(min(t.min(), times_us(m.log["time"]).min())) - 10**12)
+    reason = np.zeros(t.size, np.int16)
+
+    def flag(cond: np.ndarray, name: str) -> None:
+        reason[(reason == 0) & cond] = REASONS.index(name)
+
+    flag(~np.isfinite(pr), "no_pseudorange")
+    seg_epoch, lost = _message_loss(ctx, m)
+    flag(lost, "messages_lost")
+    mask = _mask_state(ctx, m)
+    for name, cond in mask.flags:
+        flag(cond, name)
+    mt10 = _latest(ctx, m.degradation, 10)
+    flag(mt10 < 0, "no_mt10")
+    flag((mt10 >= 0) & ctx.timed_out(m.degradation, mt10, 10), "mt10_timeout")
+    deg = {c: _take(m.degradation[c].to_numpy().astype(float), mt10) for c in m.degradation.columns[2:]}
+    fast = _fast(ctx, m, mask, seg_epoch, deg)
+    for name, cond in fast.pop("flags"):
+        flag(cond, name)
+    dudre = _delta_udre(ctx, m, lat, lon)
+    ltc = _long_term(ctx, m, mask, deg)
+    for name, cond in ltc.pop("flags"):
+        flag(cond, name)
+    geom = _geometry(ctx, eph, pr, ltc, rx, lat, lon)
+    flag(geom["row"] < 0, "no_ephemeris_iode")
+    flag(geom["elev"] < np.deg2rad(opt.mask_deg), "elevation")
+    grid = _iono(ctx, m, geom, lat, lon, deg)
+    flag(grid["mask_timeout"], "iono_mask_timeout")
+    flag(~grid["ok"], "no_iono")
+    doy = _day_of_year(t)
+    tropo, sig_tropo = mops_tropo(lat, h, doy, geom["elev"])
+
+    # --- variances (DO-229D A.4.5, J.2.4) ---------------------------------------------------------
+    s_udre = np.sqrt(fast["sigma2_udre"]) * dudre
+    eps = fast["eps_fc"] + fast["eps_rrc"] + ltc["eps_ltc"]
+    rss = deg["rss_udre"] > 0
+    sig2_flt = np.where(rss, s_udre**2 + fast["eps_fc"] ** 2 + fast["eps_rrc"] ** 2 + ltc["eps_ltc"] ** 2,
+                        (s_udre + eps) ** 2)  # fmt: skip
+    elev_deg = np.rad2deg(geom["elev"])
+    s_noise = 0.36 if opt.aad == "A" else 0.15
+    s_mp = 0.13 + 0.53 * np.exp(-elev_deg / 10.0)
+    sig2_air = s_noise**2 + s_mp**2
+    sig2 = sig2_flt + grid["sigma2_uire"] + sig2_air + sig_tropo**2
+
+    # --- corrected range and solution ----------------------------------------------------------------
+    model = geom["rho"] - C * geom["clock"] + C * geom["tgd"] + grid["slant"] + tropo
+    prefit = pr + fast["prc"] + fast["rrc_corr"] - model
+    used = reason == 0
+    k_h = K_H_PA if opt.mode == "PA" else K_H_NPA
+    sol = weighted_least_squares(epoch, epochs_us.size, geom["elev"], geom["azim"], prefit, sig2, used,
+                                 k_h=k_h, k_v=K_V_PA)  # fmt: skip
+    too_few = used & (sol.nsv[epoch] == 0)
+    reason[too_few] = REASONS.index("too_few_satellites")
+    east, north, up = sol.enu[:, 0], sol.enu[:, 1], sol.enu[:, 2]
+    epochs = pl.DataFrame(
+        {
+            "time": pl.Series(epochs_us.view("datetime64[us]")),
+            "station": pl.Series([station] * epochs_us.size, dtype=pl.Categorical),
+            "hpe": np.hypot(east, north),
+            "vpe": up,
+            "hpl": sol.hpl,
+            "vpl": sol.vpl,
+            "east": east,
+            "north": north,
+            "nsv": sol.nsv,
+            "mode": pl.Series([opt.mode] * epochs_us.size, dtype=pl.Categorical),
+        }
+    )
+    sats = pl.DataFrame(
+        {
+            "time": obs["time"],
+            "prn": obs["prn"],
+            "used": used & ~too_few,
+            "reason": pl.Series(np.asarray(REASONS)[reason]),
+            "elevation": elev_deg,
+            "azimuth": np.rad2deg(geom["azim"]),
+            "pseudorange": pr,
+            "prc": fast["prc"],
+            "rrc": fast["rrc"],
+            "rrc_corr": fast["rrc_corr"],
+            "udrei": fast["udrei"],
+            "sigma_udre": np.sqrt(fast["sigma2_udre"]),
+            "delta_udre": dudre,
+            "ai": fast["ai"],
+            "eps_fc": fast["eps_fc"],
+            "eps_rrc": fast["eps_rrc"],
+            "eps_ltc": ltc["eps_ltc"],
+            "eps_er": np.zeros(t.size),
+            "sigma_flt": np.sqrt(sig2_flt),
+            "iode": ltc["iode"],
+            "ltc_dx": ltc["dx"], "ltc_dy": ltc["dy"], "ltc_dz": ltc["dz"], "ltc_clock": C * ltc["daf0_t"],
+            "ipp_lat": grid["ipp_lat"], "ipp_lon": grid["ipp_lon"], "iono_mode": grid["mode"],
+            "obliquity": grid["fpp"],
+            "iono": grid["slant"],
+            "sigma_uire": np.sqrt(grid["sigma2_uire"]),
+            "tropo": tropo,
+            "sigma_tropo": sig_tropo,
+            "sigma_air": np.sqrt(sig2_air),
+            "sigma": np.sqrt(sig2),
+            "rho": geom["rho"],
+            "prefit": prefit,
+            "residual": sol.residual,
+        }
+    )  # fmt: skip
+    names, n_by = np.unique(np.asarray(REASONS)[reason], return_counts=True)
+    counts = {"epochs": int(epochs_us.size), "rows": int(t.size),
+              "reasons": {str(k): int(v) for k, v in zip(names, n_by, strict=True)}}  # fmt: skip
+    return SbasResult(epochs=epochs, satellites=sats, counts=counts)
+
+
+# --------------------------------------------------------------------------------------------------
+@dataclass(slots=True)
+class _Context:
+    t: np.ndarray  # epoch time per row (us)
+    prn: np.ndarray
+    opt: SbasOptions
+    base: int
+
+    @property
+    def t_avail(self) -> np.ndarray:
+        """Latest message tag usable at each row's epoch: tag + flight <= t."""
+        return self.t - round(self.opt.flight_time * US)
+
+    def timeout(self, mt: int) -> float:
+        return (TIMEOUT_PA if self.opt.mode == "PA" else TIMEOUT_NPA)[mt]
+
+    def age(self, tag_us: np.ndarray) -> np.ndarray:
+        """t - (tag + flight) in seconds."""
+        return (self.t - tag_us) / US - self.opt.flight_time
+
+    def timed_out(self, table: pl.DataFrame, rows: np.ndarray, mt: int) -> np.ndarray:
+        return self.age(_take(times_us(table["time"]), rows, fill=0)) > self.timeout(mt)
+
+
+def _take(values: np.ndarray, rows: np.ndarray, fill: float = np.nan) -> np.ndarray:
+    """``values[rows]`` with ``fill`` where rows < 0."""
+    if values.size == 0:
+        return np.full(rows.shape, fill, dtype=float if isinstance(fill, float) else values.dtype)
+    out = values[np.maximum(rows, 0)]
+    if out.dtype.kind in "iub":  # signed 64-bit (or float) so that differences and fills do not wrap
+        out = out.astype(float if isinstance(fill, float) else np.int64)
+    return np.where(rows >= 0, out, fill)
+
+
+def _select_geo(msgs: SbasMessages, geo: int | None) -> SbasMessages:
+    geos = msgs.log["geo"].unique().to_list()
+    if geo is None:
+        if len(geos) != 1:
+            raise ValueError(f"messages of several GEOs ({sorted(geos)}): choose one with geo=")
+        return msgs
+    if geo not in geos:
+        raise ValueError(f"no messages of GEO {geo} (present: {sorted(geos)})")
+    tables = {k: v.filter(pl.col("geo") == geo) for k, v in msgs.tables().items()}
+    return SbasMessages(**tables, counts=msgs.counts)
+
+
+def _latest(ctx: _Context, table: pl.DataFrame, mt: int, key: np.ndarray | None = None,
+            key_tab: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+    """Last row of ``table`` available at each epoch (per key when given)."""
+    tt = times_us(table["time"])
+    kt = np.zeros(tt.size, np.int64) if key_tab is None else key_tab
+    kq = np.zeros(ctx.t.size, np.int64) if key is None else key
+    return asof(kt, tt, kq, ctx.t_avail, ctx.base)
+
+
+def _message_loss(ctx: _Context, m: SbasMessages) -> tuple[np.ndarray, np.ndarray]:
+    """Segment of the last message at each epoch, and whether 4+ messages are missing there."""
+    log = m.log.filter(pl.col("crc_ok"))
+    tags = times_us(log["time"])
+    last = _latest(ctx, log, 0)
+    seg = np.where(last >= 0, segments(tags)[np.maximum(last, 0)], -1)
+    age = np.floor(ctx.age(_take(tags, last, fill=0)))
+    return seg, (last < 0) | (age >= 4)
+
+
+@dataclass(slots=True)
+class _Mask:
+    iodp: np.ndarray
+    position: np.ndarray
+    n_sats: np.ndarray
+    flags: list
+
+
+def _mask_state(ctx: _Context, m: SbasMessages) -> _Mask:
+    """PRN mask (MT 1) in force and each satellite's position in it."""
+    msg_t = m.mask["time"].unique(maintain_order=True)
+    msg_tab = pl.DataFrame({"time": msg_t})
+    row = _latest(ctx, msg_tab, 1)
+    t_mask = _take(times_us(msg_t), row, fill=0).astype(np.int64)
+    gps = m.mask.filter(pl.col("system") == "GPS")
+    r = _latest(ctx, gps, 1, key=ctx.prn, key_tab=gps["sv"].to_numpy().astype(np.int64))
+    in_mask = (r >= 0) & (_take(times_us(gps["time"]), r, fill=0) == t_mask)
+    n_per_msg = m.mask.group_by("time", maintain_order=True).len()["len"].to_numpy()
+    flags = [
+        ("no_mask", row < 0),
+        ("mask_timeout", (row >= 0) & (ctx.age(t_mask) > ctx.timeout(1))),
+        ("not_in_mask", (row >= 0) & ~in_mask),
+    ]
+    return _Mask(
+        iodp=np.where(in_mask, _take(gps["iodp"].to_numpy(), r, fill=0), -1).astype(np.int64),
+        position=np.where(in_mask, _take(gps["position"].to_numpy(), r, fill=0), 0).astype(np.int64),
+        n_sats=_take(n_per_msg, row, fill=0).astype(np.int64),
+        flags=flags,
+    )
+
+
+def _segment_of(tags: np.ndarray, m: SbasMessages) -> np.ndarray:
+    log_t = times_us(m.log.filter(pl.col("crc_ok"))["time"])
+    seg = segments(log_t)
+    return seg[np.clip(np.searchsorted(log_t, tags, side="right") - 1, 0, None)]
+
+
+def _fast(ctx: _Context, m: SbasMessages, mask: _Mask, seg_epoch: np.ndarray, deg: dict) -> dict:
+    """Fast corrections, RRC, UDRE and their degradation (DO-229D A.4.4.3-5, A.4.5.1)."""
+    pa = ctx.opt.mode == "PA"
+    f = m.fast
+    tf = times_us(f["time"])
+    fkey = (_segment_of(tf, m) * 4 + f["iodp"].to_numpy()) * 64 + f["position"].to_numpy()
+    qkey = (seg_epoch * 4 + mask.iodp) * 64 + mask.position
+    r = asof(fkey, tf, qkey, ctx.t_avail, ctx.base)
+    r = np.where(mask.iodp >= 0, r, -1)
+    prev = _take(previous_same_key(fkey, tf, ctx.base), r, fill=-1).astype(np.int64)
+    udrei_f = _take(f["udrei"].to_numpy(), r, fill=-1)
+    tag_f = _take(tf, r, fill=0).astype(np.int64)
+    iodf_f = _take(f["iodf"].to_numpy(), r, fill=-1)
+    # MT 6: the latest one, if newer than the fast correction and its IODF matches (or is 3)
+    i6 = m.integrity
+    t6 = times_us(i6["time"])
+    r6 = asof(_segment_of(t6, m) * 64 + i6["position"].to_numpy(), t6, seg_epoch * 64 + mask.position,
+              ctx.t_avail, ctx.base)  # fmt: skip
+    tag6 = _take(t6, r6, fill=0).astype(np.int64)
+    iodf6 = _take(i6["iodf"].to_numpy(), r6, fill=-1)
+    newer6 = (r6 >= 0) & (r >= 0) & (tag6 > tag_f)
+    match6 = newer6 & ((iodf6 == 3) | (iodf6 == iodf_f))
+    udrei = np.where(match6, _take(i6["udrei"].to_numpy(), r6, fill=-1), udrei_f)
+    t_udre = np.where(newer6, tag6, tag_f)
+    t_u = np.where(match6, tag6, tag_f)  # also the PRC time (gLAB's reading of A.4.4.4)
+    sigma2_udre = np.where(udrei >= 0, np.asarray(_SIGMA2_UDRE)[np.clip(udrei, 0, 15).astype(int)], np.nan)
+    # MT 7
+    f7 = m.fc_degradation
+    t7 = times_us(f7["time"])
+    r7 = asof(f7["iodp"].to_numpy() * 64 + f7["position"].to_numpy(), t7, mask.iodp * 64 + mask.position,
+              ctx.t_avail, ctx.base)  # fmt: skip
+    ai_index = _take(f7["ai_index"].to_numpy(), r7, fill=0).astype(int)
+    ai = _take(f7["ai"].to_numpy(), r7)
+    tlat = _take(f7["tlat"].to_numpy(), r7)
+    fc_tmout = np.asarray(FC_TIMEOUT_PA if pa else FC_TIMEOUT_NPA, float)
+    tmout = fc_tmout[ai_index]
+    tmin = _smallest_timeout(f7, r7, mask.n_sats, fc_tmout)
+    # RRC from the last two PRCs
+    prc = _take(f["prc"].to_numpy(), r)
+    prc_prev = _take(f["prc"].to_numpy(), prev)
+    dt = (tag_f - _take(tf, prev, fill=0)) / US
+    have2 = (prev >= 0) & (_take(f["udrei"].to_numpy(), prev, fill=15) < 14)
+    t_of = (ctx.t - tag_f) / US + 1.0  # t - t_of, t_of = tag - 1 s
+    rrc = np.where(have2 & (ai > 0), (prc - prc_prev) / np.where(dt > 0, dt, np.nan), 0.0)
+    in_seq = np.mod(iodf_f - _take(f["iodf"].to_numpy(), prev, fill=-9), 3) == 1
+    eps_rrc = np.where(in_seq | (ai == 0) | ~have2, 0.0, (ai * tmin / 4 + deg["brrc"] / dt) * t_of)
+    eps_fc = ai * ((ctx.t - t_u) / US + 1.0 + tlat) ** 2 / 2
+    no_fc = r < 0
+    flags = [
+        ("no_fast_correction", no_fc),
+        ("udre_timeout", ~no_fc & (ctx.age(t_udre) > ctx.timeout(6))),
+        ("not_monitored", ~no_fc & (udrei == 14)),
+        ("do_not_use", ~no_fc & (udrei == 15)),
+        ("udrei_pa", ~no_fc & pa & (udrei >= 12) & (udrei < 14)),
+        ("no_mt7", r7 < 0),
+        ("mt7_timeout", (r7 >= 0) & ctx.timed_out(f7, r7, 7)),
+        ("prc_timeout", ctx.age(t_u) > tmout),
+        ("single_prc", ~have2),
+        ("rrc_timeout", have2 & (dt > tmin)),
+        ("rrc_propagation", have2 & ((ctx.t - tag_f) / US > 8 * dt)),
+    ]
+    return {
+        "prc": np.where(no_fc, np.nan, prc), "rrc": rrc, "rrc_corr": rrc * t_of, "udrei": udrei,
+        "sigma2_udre": sigma2_udre, "ai": ai, "eps_fc": eps_fc, "eps_rrc": eps_rrc, "flags": flags,
+    }  # fmt: skip
+
+
+def _smallest_timeout(
+    f7: pl.DataFrame, r7: np.ndarray, n_sats: np.ndarray, fc_tmout: np.ndarray
+) -> np.ndarray:
+    """Smallest fast-correction time-out over the satellites of the mask, from the same MT 7."""
+    if f7.height == 0:
+        return np.full(r7.shape, np.nan)
+    tm = fc_tmout[f7["ai_index"].to_numpy().astype(int)].reshape(-1, 51)
+    cummin = np.minimum.accumulate(tm, axis=1)
+    msg = np.maximum(r7, 0) // 51
+    return np.where(r7 >= 0, cummin[msg, np.clip(n_sats - 1, 0, 50)], np.nan)
+
+
+_SIGMA2_UDRE = (
+    0.0520, 0.0924, 0.1444, 0.2830, 0.4678, 0.8315, 1.2992, 1.8709,
+    2.5465, 3.3260, 5.1968, 20.7870, 230.9661, 2078.695, np.nan, np.nan,
+)  # fmt: skip
+
+
+def _delta_udre(ctx: _Context, m: SbasMessages, lat: float, lon: float) -> np.ndarray:
+    """MT 27 delta-UDRE at the user (square regions), 1 without MT 27 (DO-229D A.4.4.13)."""
+    s = m.service
+    r = _latest(ctx, s, 27)
+    if s.height == 0:
+        return np.ones(ctx.t.size)
+    inside = np.zeros(s.height, bool)
+    reg = m.service_regions.with_row_index("k")
+    st = times_us(s["time"])
+    rt = times_us(reg["time"])
+    lat1, lat2 = reg["lat1"].to_numpy(), reg["lat2"].to_numpy()
+    lon1, lon2 = reg["lon1"].to_numpy(), reg["lon2"].to_numpy()
+    hit = (
+        reg["square"].to_numpy()
+        & (np.minimum(lat1, lat2) <= lat) & (lat <= np.maximum(lat1, lat2))
+        & (np.minimum(lon1, lon2) <= lon) & (lon <= np.maximum(lon1, lon2))
+    )  # fmt: skip
+    inside[np.searchsorted(st, rt[hit])] = True
+    value = np.where(inside, s["dudre_in"].to_numpy(), s["dudre_out"].to_numpy())
+    return np.where((r >= 0) & ~ctx.timed_out(s, r, 27), _take(value, r), 1.0)
+
+
+def _long_term(ctx: _Context, m: SbasMessages, mask: _Mask, deg: dict) -> dict:
+    """Long-term corrections (MT 25) and eps_ltc (DO-229D A.4.4.7, A.4.5.1.3)."""
+    lt = m.long_term
+    tl = times_us(lt["time"])
+    r = asof(lt["iodp"].to_numpy().astype(np.int64) * 64 + lt["position"].to_numpy(), tl,
+             mask.iodp * 64 + mask.position, ctx.t_avail, ctx.base)  # fmt: skip
+    r = np.where(mask.iodp >= 0, r, -1)
+    names = ("dx", "dy", "dz", "daf0", "ddx", "ddy", "ddz", "daf1", "velocity_code")
+    get = {c: _take(lt[c].to_numpy().astype(float), r) for c in names}
+    t0 = _take(times_us(lt["t0"].fill_null(lt["time"])), r, fill=0)
+    dt0 = np.where(get["velocity_code"] == 1, (ctx.t - t0) / US, 0.0)
+    age_tx = (ctx.t - _take(tl, r, fill=0)) / US + 1.0  # t - t_ltc, t_ltc = tag - 1 s
+    v0 = deg["cltc_v0"] * np.floor(age_tx / deg["iltc_v0"])
+    outside = np.maximum(0.0, np.maximum(-dt0, dt0 - deg["iltc_v1"]))
+    v1 = np.where(outside > 0, deg["cltc_lsb"] + deg["cltc_v1"] * outside, 0.0)
+    flags = [("no_long_term", r < 0), ("long_term_timeout", (r >= 0) & ctx.timed_out(lt, r, 25))]
+    return {
+        "iode": _take(lt["iode"].to_numpy(), r, fill=-1).astype(np.int64),
+        "dx": get["dx"] + get["ddx"] * dt0,
+        "dy": get["dy"] + get["ddy"] * dt0,
+        "dz": get["dz"] + get["ddz"] * dt0,
+        "daf0_t": get["daf0"] + get["daf1"] * dt0,
+        "eps_ltc": np.where(get["velocity_code"] == 1, v1, v0),
+        "flags": flags,
+    }  # fmt: skip
+
+
+def _geometry(ctx: _Context, eph: pl.DataFrame, pr: np.ndarray, ltc: dict, rx: np.ndarray,
+              lat: float, lon: float) -> dict:  # fmt: skip
+    """Satellite position and clock at transmission (broadcast + long-term corrections), range,
+    elevation and azimuth at the reference."""
+    n = ctx.t.size
+    row = _ephemeris_rows(ctx, eph, ltc["iode"])
+    ok = (row >= 0) & np.isfinite(pr)
+    out = {"row": row, "rho": np.full(n, np.nan), "clock": np.full(n, np.nan), "tgd": np.full(n, np.nan),
+           "elev": np.full(n, -np.pi / 2), "azim": np.zeros(n)}  # fmt: skip
+    if not ok.any():
+        return out
+    i = np.flatnonzero(ok)
+    tau0 = pr[i] / C
+    st = broadcast_state(eph, row[i], ctx.t[i], -tau0)
+    tx = -tau0 - st.clock  # transmission time offset from the epoch, s (receiver clock ~ 0 is not assumed:
+    st = broadcast_state(eph, row[i], ctx.t[i], tx)  # the clock bias cancels in the solution's clock term)
+    pos = st.position + np.stack([ltc["dx"][i], ltc["dy"][i], ltc["dz"][i]], axis=-1)
+    for _ in range(2):
+        rho = np.linalg.norm(pos - rx, axis=-1)
+        rot = rotate_earth(pos, rho / C)
+    rho = np.linalg.norm(rot - rx, axis=-1)
+    e, nn, u = pymap3d.ecef2enu(rot[:, 0], rot[:, 1], rot[:, 2], lat, lon,
+                                float(pymap3d.ecef2geodetic(*rx)[2]))  # fmt: skip
+    out["rho"][i] = rho
+    out["clock"][i] = st.clock + ltc["daf0_t"][i]
+    out["tgd"][i] = st.tgd
+    out["elev"][i] = np.arctan2(u, np.hypot(e, nn))
+    out["azim"][i] = np.arctan2(e, nn)
+    return out
+
+
+def _ephemeris_rows(ctx: _Context, eph: pl.DataFrame, iode: np.ndarray) -> np.ndarray:
+    """Healthy broadcast record with the IODE of the long-term correction whose fit interval covers t.
+
+    Unlike :func:`overbound.io.rinex_nav.select_ephemeris` the RINEX transmission time is not
+    required to precede t: merged daily files carry the time a network first logged the record,
+    often later than the SBAS started correcting that IODE (PRN 7, IODE 89 on the EGNOS day:
+    corrected from 08:03, logged 08:43). gLAB does not check it either.
+    """
+    toe = times_us(eph["toe_time"])
+    fit = eph["fit_interval"].to_numpy()
+    half = (np.where(fit > 1, fit, 4.0) * 1800 * US).astype(np.int64)
+    key = eph["prn"].to_numpy().astype(np.int64) * 1024 + eph["iode"].to_numpy().astype(np.int64)
+    healthy = eph["health"].to_numpy() == 0
+    r = asof(key[healthy], (toe - half)[healthy], ctx.prn * 1024 + iode, ctx.t, ctx.base)
+    r = np.where(r >= 0, np.flatnonzero(healthy)[np.maximum(r, 0)], -1)
+    fits = np.abs(ctx.t - _take(toe, r, fill=0)) <= _take(half, r, fill=0)
+    return np.where((iode >= 0) & (r >= 0) & fits, r, -1)
+
+
+def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, deg: dict) -> dict:
+    """Grid ionosphere: slant delay, sigma_UIRE^2 and the pierce point (DO-229D A.4.4.10)."""
+    n = ctx.t.size
+    lat_pp, lon_pp = ionomod.pierce_point(np.deg2rad(lat), np.deg2rad(lon), geom["elev"], geom["azim"])
+    fpp = ionomod.obliquity(geom["elev"])
+    mk = m.igp_mask
+    # MT 18 in force per band, and its time-out
+    band_key = mk["band"].to_numpy().astype(np.int64)
+    tmk = times_us(mk["time"])
+    # grid values: MT 26 rows placed on the globe through the mask of their band and IODI
+    where = mk.select("band", "iodi", "igp", "lat", "lon").unique(("band", "iodi", "igp"), keep="last")
+    g = m.iono.join(where, on=("band", "iodi", "igp"), how="inner").drop_nulls(("lat", "lon"))
+    tg = times_us(g["time"])
+    gkey = _grid_key(g["lat"].to_numpy(), g["lon"].to_numpy())
+    t_av = ctx.t_avail
+    sel = geom["elev"] > 0
+    idx = np.flatnonzero(sel)
+    flight_us = round(ctx.opt.flight_time * US)
+
+    def usable(rows: np.ndarray, clat: np.ndarray, clon: np.ndarray) -> np.ndarray:
+        tq = np.repeat(t_av[idx[rows]][:, None], 4, axis=1)
+        r = asof(gkey, tg, _grid_key(clat, clon).ravel(), tq.ravel(), ctx.base).reshape(clat.shape)
+        age = (tq + flight_us - _take(tg, r, fill=0)) / US - ctx.opt.flight_time
+        band = _take(g["band"].to_numpy(), r, fill=0).astype(np.int64)
+        return (
+            (r >= 0)
+            & (age <= ctx.timeout(26))
+            & np.isfinite(_take(g["sigma2_give"].to_numpy(), r))
+            & ~_take(g["givd_dnu"].to_numpy(), r, fill=True).astype(bool)
+            & (_take(g["iodi"].to_numpy(), r, fill=-1) == _band_iodi(mk, band_key, tmk, band, tq, ctx.base))
+        )
+
+    ok_sub, clat, clon, w, mode_sub = ionomod.select_and_interpolate(
+        np.rad2deg(lat_pp[idx]), np.rad2deg(lon_pp[idx]), usable
+    )
+    k = _grid_key(clat, clon)
+    tq = np.repeat(t_av[idx][:, None], 4, axis=1)
+    r = asof(gkey, tg, k.ravel(), tq.ravel(), ctx.base).reshape(k.shape)
+    givd = np.nan_to_num(_take(g["givd"].to_numpy(), r))
+    s2give = np.nan_to_num(_take(g["sigma2_give"].to_numpy(), r))
+    t_iono = (tq + flight_us - _take(tg, r, fill=0)) / US + 1.0  # t - (tag - 1)
+    d = {k2: deg[k2][idx][:, None] for k2 in ("ciono_step", "iiono", "ciono_ramp", "rss_iono")}
+    eps = d["ciono_step"] * np.floor(t_iono / d["iiono"]) + d["ciono_ramp"] * t_iono
+    s2grid = np.where(d["rss_iono"] > 0, s2give + eps**2, (np.sqrt(s2give) + eps) ** 2)
+    vert = (w * givd).sum(axis=1)
+    s2uive = (w * s2grid).sum(axis=1)
+    ok = np.zeros(n, bool)
+    ok[idx] = ok_sub
+    mode = np.full(n, -1)
+    mode[idx] = mode_sub
+    slant = np.full(n, np.nan)
+    slant[idx] = np.where(ok_sub, fpp[idx] * vert, np.nan)
+    s2uire = np.full(n, np.nan)
+    s2uire[idx] = np.where(ok_sub, fpp[idx] ** 2 * s2uive, np.nan)
+    # mask time-out: the latest MT 18 of any band older than its time-out
+    last18 = asof(np.zeros(tmk.size, np.int64), tmk, np.zeros(n, np.int64), t_av, ctx.base)
+    mask_to = (last18 >= 0) & (ctx.age(_take(tmk, last18, fill=0)) > ctx.timeout(18))
+    return {"ok": ok, "mode": mode, "slant": slant, "sigma2_uire": s2uire, "fpp": fpp,
+            "mask_timeout": mask_to,
+            "ipp_lat": np.rad2deg(lat_pp), "ipp_lon": np.rad2deg(lon_pp)}  # fmt: skip
+
+
+def _grid_key(lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
+    """One integer per 5-degree IGP position."""
+    i = np.round((np.asarray(lat, float) + 90) / 5).astype(np.int64)
+    j = np.round((np.asarray(lon, float) + 180) / 5).astype(np.int64) % 72
+    return i * 72 + j
+
+
+def _band_iodi(mk: pl.DataFrame, band_key: np.ndarray, tmk: np.ndarray, band_q: np.ndarray, t_q: np.ndarray,
+               base: int) -> np.ndarray:  # fmt: skip
+    """IODI of the latest MT 18 of each queried band."""
+    r = asof(band_key, tmk, band_q.ravel(), t_q.ravel(), base).reshape(band_q.shape)
+    return _take(mk["iodi"].to_numpy(), r, fill=-2)
+
+
+def _day_of_year(t_us: np.ndarray) -> np.ndarray:
+    d = t_us.view("datetime64[us]").astype("datetime64[D]")
+    return (d - d.astype("datetime64[Y]")).astype(np.int64) + 1

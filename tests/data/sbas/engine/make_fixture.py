@@ -1,0 +1,70 @@
+"""Build the SBAS engine fixture of tests/data/sbas/engine/ (see PROVENANCE.md there).
+
+Run from the repository root::
+
+    python tests/data/sbas/engine/make_fixture.py /path/to/gLAB_linux
+
+1. ``SYNT0140_h02-04.19o.gz``: the synthetic Toulouse observations (shared/data/egnos-ems-prn123-2019-014/
+   synthetic-obs/SYNT0140.19o.gz), header and the epochs 02:00:00-04:59:30 GPST, unmodified.
+2. ``h03.ems.gz``, ``h04.ems.gz``: the real EGNOS PRN 123 EMS hours 03 and 04 (hour 02 is
+   ``../ems/h02.ems.gz``); ``brdc0140.19n.gz``: the day's broadcast ephemerides.
+3. ``glab_h02-04.out.gz``: gLAB's processing of exactly these files (command in PROVENANCE.md),
+   reduced to its INFO, SBASOUT, SBASVAR and SBASUNSEL lines.
+All gzip files are written without name or time stamp, so they do not depend on the run.
+"""
+
+from __future__ import annotations
+
+import gzip
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[4]
+OUT = Path(__file__).resolve().parent
+DATA = ROOT.parent / "shared" / "data" / "egnos-ems-prn123-2019-014"
+KEEP = ("INFO", "SBASOUT", "SBASVAR", "SBASUNSEL")
+#: gLAB options: SBAS 1F, PA, GEO 123, without the pre-processing that DO-229 does not have.
+GLAB_OPTIONS = (
+    "--pre:minsnr", "--pre:cs:sf", "-pre:smooth", "0", "-pre:smoothmin", "0", "-pre:geosel", "123",
+    "-model:sbasmode", "PA", "-print:none", "-print:info", "-print:sbasout", "-print:sbasvar",
+    "-print:sbasunsel",
+)  # fmt: skip
+
+
+def write_gz(path: Path, data: bytes) -> None:
+    path.write_bytes(gzip.compress(data, compresslevel=9, mtime=0))
+
+
+def cut_obs(text: str, first: str = " 19  1 14  2  0  0", last: str = " 19  1 14  5  0  0") -> str:
+    """Header plus the epochs from ``first`` (included) to ``last`` (excluded) of a RINEX 2 file."""
+    end = text.index("END OF HEADER")
+    end = text.index("\n", end) + 1
+    start, stop = text.index("\n" + first, end) + 1, text.index("\n" + last, end) + 1
+    return text[:end] + text[start:stop]
+
+
+def main(glab: str) -> None:
+    obs = cut_obs(gzip.decompress((DATA / "synthetic-obs" / "SYNT0140.19o.gz").read_bytes()).decode())
+    write_gz(OUT / "SYNT0140_h02-04.19o.gz", obs.encode())
+    for hour in ("h03", "h04"):
+        write_gz(OUT / f"{hour}.ems.gz", (DATA / "ems" / f"{hour}.ems").read_bytes())
+    write_gz(OUT / "brdc0140.19n.gz", (DATA / "brdc0140.19n").read_bytes())
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        (work / "SYNT0140.19o").write_text(obs)
+        ems = gzip.decompress((OUT.parent / "ems" / "h02.ems.gz").read_bytes())
+        ems += (DATA / "ems" / "h03.ems").read_bytes() + (DATA / "ems" / "h04.ems").read_bytes()
+        (work / "egnos123.ems").write_bytes(ems)
+        (work / "brdc0140.19n").write_bytes((DATA / "brdc0140.19n").read_bytes())
+        inputs = ["-input:obs", "SYNT0140.19o", "-input:nav", "brdc0140.19n", "-input:sbas1f", "egnos123.ems"]
+        cmd = [glab, *inputs, *GLAB_OPTIONS, "-output:file", "full.out"]
+        subprocess.run(cmd, cwd=work, check=True, stdout=subprocess.DEVNULL)
+        lines = (work / "full.out").read_text().splitlines(keepends=True)
+    kept = [ln for ln in lines if ln.split(None, 1)[0].rstrip("*") in KEEP and "built on" not in ln]
+    write_gz(OUT / "glab_h02-04.out.gz", "".join(kept).encode())
+
+
+if __name__ == "__main__":
+    main(sys.argv[1] if len(sys.argv) > 1 else "gLAB_linux")
