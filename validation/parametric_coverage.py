@@ -29,7 +29,8 @@ import time
 
 import numpy as np
 import polars as pl
-from scipy import special, stats
+from evt_coverage import binomial_ci  # the same Clopper-Pearson share interval (same folder)
+from scipy import special
 
 from overbound.methods.parametric import parametric_analysis
 from overbound.stats.parametric import RatioFit, WeibullFit, integrity_probabilities
@@ -114,14 +115,6 @@ def one(seed: int, hours: float) -> dict:
             "pl_decorrelation_s": ax.pl_decorrelation_s,
         }
     return row
-
-
-def binomial_ci(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
-    """Clopper-Pearson interval of a share k/n."""
-    a = 1.0 - level
-    lo = stats.beta.ppf(a / 2, k, n - k + 1) if k > 0 else 0.0
-    hi = stats.beta.ppf(1 - a / 2, k + 1, n - k) if k < n else 1.0
-    return float(lo), float(hi)
 
 
 def shares(rows: list[dict], true: dict) -> dict:

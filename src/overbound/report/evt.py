@@ -44,7 +44,7 @@ from overbound.report.evt_figures import (
     plot_vk,
 )
 from overbound.report.figures import style
-from overbound.report.page import PAGE_CSS, escape, figure_html, scientific
+from overbound.report.page import PAGE_CSS, badge, escape, figure_html, percent, row_table, scientific
 from overbound.stats.dependence import VKCurve
 
 __all__ = [
@@ -66,7 +66,6 @@ REPORT_NAME = "evt.html"
 _AXIS = {"vertical": "Vertical", "horizontal": "Horizontal"}
 _SI = {"vertical": "|VPE|/VPL", "horizontal": "HPE/HPL"}
 #: Badge class and text of a service's verdict (``meets_requirement``).
-_VERDICT = {True: ("pass", "meets"), False: ("fail", "does not meet"), None: ("na", "no estimate")}
 _e = escape
 
 
@@ -125,28 +124,12 @@ def _h_ix(ci: tuple[float, float], digits: int = 3) -> str:
     return f"[{_h_x(ci[0], digits)}, {_h_x(ci[1], digits)}]"
 
 
-def _pct(level: float) -> str:
-    return f"{100 * level:g}&nbsp;%"
-
-
-def _table(head: Sequence[str], rows: Sequence[Sequence[str]], cls: str) -> str:
-    """A table of HTML cells; the first cell of a row is its header."""
-    thead = "".join(f"<th>{h}</th>" for h in head)
-    body = "\n".join(f"<tr><th>{r[0]}</th>" + "".join(f"<td>{c}</td>" for c in r[1:]) + "</tr>" for r in rows)
-    return f'<table class="{cls}"><thead><tr>{thead}</tr></thead>\n<tbody>\n{body}\n</tbody></table>'
-
-
-def _badge(meets: bool | None, name: str, note: str) -> str:
-    kind, text = _VERDICT[meets]
-    return f'<span class="badge {kind}" data-kpi="{_e(name)}" title="{_e(note)}">{text}</span>'
-
-
 # ---------------------------------------------------------------------------
 # tables
 
 
 def _headline_rows(a: TailAnalysis, t: TailFit) -> list[list[str]]:
-    conf = _pct(a.confidence)
+    conf = percent(a.confidence)
     dep = a.dependence
     n_app = APPROACH_S / a.counts.interval_s
     choice = t.threshold_choice
@@ -283,7 +266,7 @@ def _counts_table(a: TailAnalysis) -> str:
         ["TTA before an alert dropped", f"{c.n_tta:,}"],
         ["used", f"{c.n_used:,}"],
     ]
-    return _table(["epochs", "count"], rows, "evt-epochs")
+    return row_table(["epochs", "count"], rows, "evt-epochs")
 
 
 def _service_rows(a: TailAnalysis) -> list[list[str]]:
@@ -300,7 +283,7 @@ def _service_rows(a: TailAnalysis) -> list[list[str]]:
                 scientific(h.p_hmi_exposure),
                 scientific(h.p_hmi_exposure_95),
                 scientific(h.integrity_risk),
-                _badge(h.meets_requirement, name, h.message),
+                badge(h.meets_requirement, name, h.message),
                 _e(h.message),
             ]
         )
@@ -330,8 +313,8 @@ def _services_html(a: TailAnalysis) -> str:
         f"<p>HMI probability per service level (Veerman et al., section 3.6): {_e(variable)} on the "
         "epochs with PL &lt; AL, those in the time-to-alert before an alert dropped. The verdict "
         "compares the upper bound per exposure (the upper end of the "
-        f"{_pct(a.confidence)} interval) with the integrity requirement.</p>"
-        + _table(head, _service_rows(a), "evt-services")
+        f"{percent(a.confidence)} interval) with the integrity requirement.</p>"
+        + row_table(head, _service_rows(a), "evt-services")
     )
 
 
@@ -559,7 +542,7 @@ def evt_section_html(analysis: TailAnalysis, *, series: tuple[np.ndarray, np.nda
         f"<p>Probability of misleading information per epoch, P<sub>MI</sub> = P(SI &gt; 1) with SI = "
         f"{_e(_SI[a.axis])}, extrapolated from the tail of SI by a generalised Pareto distribution "
         f"(Veerman et al., GIMAT, sections 3.2–3.7): P<sub>MI</sub> = {scientific(t.p)}, "
-        f"{_pct(a.confidence)} interval {_h_ci(t.p_ci)}, upper bound P<sub>MI95</sub> = "
+        f"{percent(a.confidence)} interval {_h_ci(t.p_ci)}, upper bound P<sub>MI95</sub> = "
         f"{scientific(t.p_95)}; per {APPROACH_S:g}&nbsp;s approach {scientific(t.p_approach)}, upper bound "
         f"{scientific(t.p_approach_95)}. {a.counts.n_used:,} epochs analysed{filt}; "
         f"{a.n_boot:,} bootstrap resamples, seed {a.seed if a.seed is not None else 'none'}.</p>"
@@ -568,7 +551,7 @@ def evt_section_html(analysis: TailAnalysis, *, series: tuple[np.ndarray, np.nda
     parts = [
         lead,
         _messages_html(_messages(a, t)),
-        _table(["quantity", "value", "how"], _headline_rows(a, t), "evt-headline"),
+        row_table(["quantity", "value", "how"], _headline_rows(a, t), "evt-headline"),
         "<h3>Epochs</h3>",
         _counts_table(a),
         "<h3>HMI per service level</h3>",

@@ -5,12 +5,13 @@ from __future__ import annotations
 import base64
 import html
 import math
+from collections.abc import Sequence
 
 from matplotlib.axes import Axes
 
 from overbound.report.figures import close_figure, figure_png
 
-__all__ = ["FIGURE_DPI", "PAGE_CSS", "escape", "figure_html", "scientific"]
+__all__ = ["FIGURE_DPI", "PAGE_CSS", "badge", "escape", "figure_html", "percent", "row_table", "scientific"]
 
 #: Resolution of the figures embedded in the pages.
 FIGURE_DPI = 110
@@ -118,3 +119,25 @@ def scientific(x: float | None) -> str:
     if round(mant, 2) >= 10:
         mant, exp = mant / 10, exp + 1
     return f"{mant:.3g}·10<sup>{'−' if exp < 0 else ''}{abs(exp)}</sup>"
+
+
+#: Badge class and text of a verdict (``None``: no estimate).
+VERDICT = {True: ("pass", "meets"), False: ("fail", "does not meet"), None: ("na", "no estimate")}
+
+
+def percent(level: float) -> str:
+    """A level as a percentage with a non-breaking space: ``0.95`` -> ``95&nbsp;%``."""
+    return f"{100 * level:g}&nbsp;%"
+
+
+def row_table(head: Sequence[str], rows: Sequence[Sequence[str]], cls: str) -> str:
+    """A table of HTML cells; the first cell of a row is its header."""
+    thead = "".join(f"<th>{h}</th>" for h in head)
+    body = "\n".join(f"<tr><th>{r[0]}</th>" + "".join(f"<td>{c}</td>" for c in r[1:]) + "</tr>" for r in rows)
+    return f'<table class="{cls}"><thead><tr>{thead}</tr></thead>\n<tbody>\n{body}\n</tbody></table>'
+
+
+def badge(meets: bool | None, name: str, note: str) -> str:
+    """A pass / fail / no-estimate badge for the KPI ``name``, ``note`` as its tooltip."""
+    kind, text = VERDICT[meets]
+    return f'<span class="badge {kind}" data-kpi="{escape(name)}" title="{escape(note)}">{text}</span>'

@@ -46,7 +46,7 @@ from overbound.methods.parametric import (
 )
 from overbound.methods.pooling import PE_PL
 from overbound.report.figures import plot_timeseries, style
-from overbound.report.page import PAGE_CSS, escape, figure_html, scientific
+from overbound.report.page import PAGE_CSS, badge, escape, figure_html, percent, row_table, scientific
 from overbound.report.parametric_figures import (
     TINY,
     LocalFit,
@@ -89,7 +89,6 @@ _RATIO = {"vertical": "VPE/VPL", "horizontal": "HPE/HPL"}
 _PE = {"vertical": "|VPE|", "horizontal": "HPE"}
 _PL = {"vertical": "VPL", "horizontal": "HPL"}
 #: Badge class and text of a verdict.
-_VERDICT = {True: ("pass", "meets"), False: ("fail", "does not meet"), None: ("na", "no estimate")}
 _e = escape
 
 
@@ -290,25 +289,9 @@ def _h_s(x: float) -> str:
     return "n.a." if math.isnan(x) else f"{x:g}&nbsp;s"
 
 
-def _pct(level: float) -> str:
-    return f"{100 * level:g}&nbsp;%"
-
-
 def _t_pb(p: float | None, lg: float | None, pb: float | None, lgb: float | None) -> str:
     """``nominal [bound]`` as plain text for the figures."""
     return f"{format_probability(p, lg)} [{format_probability(pb, lgb)}]"
-
-
-def _table(head: Sequence[str], rows: Sequence[Sequence[str]], cls: str) -> str:
-    """A table of HTML cells; the first cell of a row is its header."""
-    thead = "".join(f"<th>{h}</th>" for h in head)
-    body = "\n".join(f"<tr><th>{r[0]}</th>" + "".join(f"<td>{c}</td>" for c in r[1:]) + "</tr>" for r in rows)
-    return f'<table class="{cls}"><thead><tr>{thead}</tr></thead>\n<tbody>\n{body}\n</tbody></table>'
-
-
-def _badge(meets: bool | None, name: str, note: str) -> str:
-    kind, text = _VERDICT[meets]
-    return f'<span class="badge {kind}" data-kpi="{_e(name)}" title="{_e(note)}">{text}</span>'
 
 
 # ---------------------------------------------------------------------------
@@ -329,7 +312,7 @@ def _summary_rows(analysis: ParametricAnalysis, a: AxisParametric) -> list[list[
             f"P<sub>HMI</sub> {_h_pb(s.p_hmi, s.log10_p_hmi, s.p_hmi_bound, s.log10_p_hmi_bound)} per epoch; "
             f"bound per {lv.integrity_exposure_s:g}&nbsp;s {_h_p(_exp10(lg), lg)} against "
             f"{scientific(lv.integrity_risk)} "
-            + _badge(v["integrity"], f"{name}-integrity", f"union bound over {n_exp:g} epochs")
+            + badge(v["integrity"], f"{name}-integrity", f"union bound over {n_exp:g} epochs")
         )
         unav = _h_pb(
             s.unavailability_fit,
@@ -340,20 +323,20 @@ def _summary_rows(analysis: ParametricAnalysis, a: AxisParametric) -> list[list[
         avail = (
             f"unavailability {unav}, counted {_h_p(s.unavailability_counted)} against "
             f"{scientific(1.0 - lv.availability)} "
-            + _badge(v["availability"], f"{name}-availability", "bound of the Weibull unavailability")
+            + badge(v["availability"], f"{name}-availability", "bound of the Weibull unavailability")
         )
         cont = (
             f"counted {_h_p(s.continuity_counted)}, fit {_h_p(s.continuity_fit)} "
             f"[{_h_p(s.continuity_fit_bound)}] per {s.continuity_window_s:g}&nbsp;s against "
             f"{scientific(lv.continuity_risk)} "
-            + _badge(v["continuity"], f"{name}-continuity", "log-linear fit of the bound at AL")
+            + badge(v["continuity"], f"{name}-continuity", "log-linear fit of the bound at AL")
         )
         rows.append([_e(name), f"{s.alert_limit:g}&nbsp;m", integ, avail, cont])
     return rows
 
 
 def _lead(analysis: ParametricAnalysis, a: AxisParametric) -> str:
-    conf = _pct(analysis.confidence)
+    conf = percent(analysis.confidence)
     r = a.ratio_fit
     law = (
         f"normal (mean {_h_x(r.mean, 3)}, σ {_h_x(r.sigma, 3)})"
@@ -390,7 +373,7 @@ def _fit_text(f) -> str:
 
 
 def _fits_rows(analysis: ParametricAnalysis, a: AxisParametric) -> list[list[str]]:
-    conf = _pct(analysis.confidence)
+    conf = percent(analysis.confidence)
     r, rb = a.ratio_fit, a.ratio_bound_fit
     ratio = _e(_RATIO[a.axis])
     how = "auto: first lag with ACF below 1/e" if a.decorrelation_auto else "given"
@@ -747,7 +730,7 @@ def _axis_section(
     parts = [_lead(analysis, a)]
     if summary:
         parts.append(
-            _table(
+            row_table(
                 ["service", "AL", "integrity", "availability", "continuity"], summary, "parametric-summary"
             )
         )
@@ -758,12 +741,12 @@ def _axis_section(
         parts.append('<ul class="parametric-notes">' + "".join(f"<li>{_e(m)}</li>" for m in msgs) + "</ul>")
     parts += [
         "<h3>Fits</h3>",
-        _table(["quantity", "value", "how"], _fits_rows(analysis, a), "parametric-fits"),
+        row_table(["quantity", "value", "how"], _fits_rows(analysis, a), "parametric-fits"),
     ]
     if summary:
         parts += [
             "<h3>Per service (per epoch; continuity per window)</h3>",
-            _table(
+            row_table(
                 [
                     "service",
                     "AL",
@@ -852,7 +835,7 @@ def write_parametric_report(
         "Rayleigh (horizontal) law gives P<sub>MI</sub>; a Weibull fit of the PL the unavailability; "
         "their product, integrated over the Stanford regions, P<sub>HMI</sub>; the 15&nbsp;s count over a "
         "range of alert limits the non-continuity and its log-linear fit. Bounds at "
-        f"{_pct(analysis.confidence)} from the effective sample sizes of the correlated series.</p>\n"
+        f"{percent(analysis.confidence)} from the effective sample sizes of the correlated series.</p>\n"
         f"{parametric_section_html(analysis, table)}\n</main>\n</body>\n</html>\n"
     )
     path = directory / REPORT_NAME
