@@ -7,6 +7,7 @@ Fixture (tests/data/sbas/engine, PROVENANCE.md there): synthetic noise-free Toul
 
 from __future__ import annotations
 
+import functools
 import gzip
 from pathlib import Path
 
@@ -19,6 +20,7 @@ from overbound.io.rinex_nav import read_rinex_nav
 from overbound.io.rinex_obs import read_rinex_obs
 from overbound.io.schema import REQUIRED
 from overbound.sbas import iono, tropo
+from overbound.sbas.corrections import previous_other_value
 from overbound.sbas.engine import REASONS, SbasOptions, run_sbas
 from overbound.sbas.messages import decode
 from overbound.sbas.solution import weighted_least_squares
@@ -27,18 +29,44 @@ DATA = Path(__file__).resolve().parents[1] / "data" / "sbas"
 FIX = DATA / "engine"
 
 
-@pytest.fixture(scope="module")
-def run():
-    obs, _ = read_rinex_obs(FIX / "SYNT0140_h02-04.19o.gz")
-    nav, _ = read_rinex_nav(FIX / "brdc0140.19n.gz")
-    frames, _ = read_ems([DATA / "ems" / "h02.ems.gz", FIX / "h03.ems.gz", FIX / "h04.ems.gz"])
-    return run_sbas(obs.table, nav.table, decode(frames), obs.header.approx_position, station="synt")
+#: gLAB comparison cases: observation file, EMS files, gLAB output (PROVENANCE.md).
+CASES = {
+    "toulouse_02-05": ("SYNT0140_h02-04.19o.gz",
+                       (DATA / "ems" / "h02.ems.gz", FIX / "h03.ems.gz", FIX / "h04.ems.gz"),
+                       "glab_h02-04.out.gz"),
+    "toulouse_1930-2210": ("SYNT0140_1930-2210.19o.gz", (FIX / "ems_1930-2210.ems.gz",),
+                           "glab_synt_1930-2210.out.gz"),
+    "brussels_1930-2210": ("SYNB0140_1930-2210.19o.gz", (FIX / "ems_1930-2210.ems.gz",),
+                           "glab_synb_1930-2210.out.gz"),
+}  # fmt: skip
 
 
-@pytest.fixture(scope="module")
-def glab():
+@functools.cache
+def _nav():
+    return read_rinex_nav(FIX / "brdc0140.19n.gz")[0]
+
+
+@functools.cache
+def _case(name: str):
+    """(name, ours, gLAB tables, (obs, msgs)); the engine uses gLAB's relativistic term so that the
+    positions compare at the millimetre."""
+    obs_name, ems, glab_name = CASES[name]
+    obs, _ = read_rinex_obs(FIX / obs_name)
+    frames, _ = read_ems(list(ems))
+    msgs = decode(frames)
+    opt = SbasOptions(relativity="rv")
+    ours = run_sbas(obs.table, _nav().table, msgs, obs.header.approx_position, station="synt", options=opt)
+    return name, ours, _read_glab(FIX / glab_name), (obs, msgs)
+
+
+@pytest.fixture(params=sorted(CASES))
+def case(request):
+    return _case(request.param)
+
+
+def _read_glab(path: Path) -> tuple[pl.DataFrame, pl.DataFrame, pl.DataFrame]:
     rows: dict[str, list[list[str]]] = {}
-    for line in gzip.decompress((FIX / "glab_h02-04.out.gz").read_bytes()).decode().splitlines():
+    for line in gzip.decompress(path.read_bytes()).decode().splitlines():
         parts = line.split()
         rows.setdefault(parts[0], []).append(parts)
     out = pl.DataFrame(
@@ -47,12 +75,15 @@ def glab():
         schema=["sod", "hpl", "vpl", "north", "east", "up", "used"], orient="row",
     )  # fmt: skip
     var = pl.DataFrame(
-        [(float(r[3]), int(r[6]), *map(float, r[15:24]), *map(float, r[25:28])) for r in rows["SBASVAR"]
-         if r[0] == "SBASVAR"],
+        [(float(r[3]), int(r[6]), *map(float, r[15:24]), *map(float, r[25:28])) for r in rows["SBASVAR"]],
         schema=["sod", "prn", "sigma", "sigma_flt", "sigma_udre", "delta_udre", "source", "eps_fc", "eps_rrc",
                 "eps_ltc", "eps_er", "sigma_uire", "sigma_tropo", "sigma_air"], orient="row",
     )  # fmt: skip
-    return out, var
+    unsel = pl.DataFrame(
+        [(float(r[3]), int(r[6]), int(r[9])) for r in rows.get("SBASUNSEL", [])],
+        schema=["sod", "prn", "code"], orient="row",
+    )  # fmt: skip
+    return out, var, unsel
 
 
 def _sod(df: pl.DataFrame) -> pl.DataFrame:
@@ -61,14 +92,15 @@ def _sod(df: pl.DataFrame) -> pl.DataFrame:
     return df.with_columns(sod=sod.cast(pl.Float64))
 
 
-def test_epoch_table_has_the_schema_columns(run):
+def test_epoch_table_has_the_schema_columns(case):
+    _, run, _, _ = case
     assert set(REQUIRED) <= set(run.epochs.columns)
     assert run.epochs["time"].is_sorted()
     assert set(run.satellites["reason"].unique()) <= set(REASONS)
 
 
-def test_same_epochs_and_satellites_as_glab(run, glab):
-    out, _ = glab
+def test_same_epochs_and_satellites_as_glab(case):
+    _, run, (out, _, _), _ = case
     ours = _sod(run.epochs).filter(pl.col("hpl").is_not_nan())
     assert ours["sod"].to_list() == out["sod"].to_list()
     used = (
@@ -81,19 +113,20 @@ def test_same_epochs_and_satellites_as_glab(run, glab):
     assert (j["used"] == j["prn"]).all()
 
 
-def test_protection_levels_and_errors_match_glab(run, glab):
-    out, _ = glab
+def test_protection_levels_and_errors_match_glab(case):
+    _, run, (out, _, _), _ = case
     j = _sod(run.epochs).join(out, on="sod", suffix="_glab")
-    # gLAB prints 4 decimals; the remaining difference comes from the ionospheric sigma at low elevation
-    pairs = (("hpl", "hpl_glab", 0.01), ("vpl", "vpl_glab", 0.01), ("east", "east_glab", 0.02),
-             ("north", "north_glab", 0.02), ("vpe", "up", 0.02))  # fmt: skip
+    assert j.height == out.height
+    # gLAB prints 4 decimals; what remains is the MOPS tropospheric delay below 6 deg elevation (< 3 mm)
+    pairs = (("hpl", "hpl_glab", 0.001), ("vpl", "vpl_glab", 0.001), ("east", "east_glab", 0.005),
+             ("north", "north_glab", 0.005), ("vpe", "up", 0.005))  # fmt: skip
     for ours, theirs, tol in pairs:
         worst = float((j[ours] - j[theirs]).abs().max())
         assert worst < tol, (ours, worst)
 
 
-def test_sigma_terms_match_glab(run, glab):
-    _, var = glab
+def test_sigma_terms_match_glab(case):
+    _, run, (_, var, _), _ = case
     s = _sod(run.satellites).filter("used").with_columns(pl.col("prn").cast(pl.Int64))
     j = s.join(var, on=("sod", "prn"), suffix="_glab")
     assert j.height == s.height
@@ -102,6 +135,34 @@ def test_sigma_terms_match_glab(run, glab):
         worst = float((j[name] - j[f"{name}_glab"]).abs().max())
         assert worst < 0.005, (name, worst)
     assert float((j["sigma_udre"] - j["sigma_udre_glab"]).abs().max()) < 0.0001
+
+
+@pytest.mark.parametrize("name", ["toulouse_1930-2210", "brussels_1930-2210"])
+def test_evening_window_exercises_iode_change_and_triangle_rule(name):
+    _, run, (_, _, unsel), _ = _case(name)
+    sats = _sod(run.satellites).with_columns(pl.col("prn").cast(pl.Int64))
+    # IODE change-over at 22:03 with no new ephemeris in the daily file: the previous IODE carries on
+    prev = sats.filter("used" & pl.col("previous_iode"))
+    assert prev.height > 0 and prev["sod"].min() >= 22 * 3600
+    # ... until its last correction times out (240 s in PA); then gLAB reports "no broadcast block" (34)
+    ours_34 = sats.filter(pl.col("reason") == "no_ephemeris_iode").select("sod", "prn")
+    glab_34 = unsel.filter(pl.col("code") == 34).select("sod", "prn")
+    assert ours_34.join(glab_34, on=("sod", "prn"), how="anti").height == 0
+    assert glab_34.join(ours_34, on=("sod", "prn"), how="anti").height == 0
+    # the pierce point outside the triangle of usable IGPs (gLAB 44) rejects the same rows
+    ours_44 = sats.filter(pl.col("reason") == "iono_outside_triangle").select("sod", "prn")
+    glab_44 = unsel.filter(pl.col("code") == 44).select("sod", "prn")
+    assert glab_44.join(ours_44, on=("sod", "prn"), how="anti").height == 0
+    if name.startswith("toulouse"):
+        assert glab_44.height > 0
+
+
+def test_default_relativity_differs_from_glab_by_centimetres_only():
+    _, run, _, (obs, msgs) = _case("toulouse_02-05")
+    kep = run_sbas(obs.table, _nav().table, msgs, obs.header.approx_position)
+    both = run.satellites["used"].to_numpy() & kep.satellites["used"].to_numpy()
+    d = (kep.satellites["prefit"].to_numpy() - run.satellites["prefit"].to_numpy())[both]
+    assert 0.001 < np.abs(d).max() < 0.02
 
 
 def test_mops_troposphere_values():
@@ -124,6 +185,22 @@ def test_pierce_point_and_obliquity_at_zenith_and_horizon():
     assert iono.obliquity(np.array([0.0]))[0] == pytest.approx(1 / np.sqrt(1 - ratio**2))
 
 
+def _grid(mask_pts, bad=(), dnu=()):
+    """in_mask / status callbacks for a fixed set of IGPs (lat, lon); ``bad`` unusable, ``dnu`` don't use."""
+
+    def member(pts, clat, clon):
+        key = {(round(a), round(b)) for a, b in pts}
+        return np.array([[(round(a), round(b)) in key for a, b in zip(la, lo, strict=True)]
+                         for la, lo in zip(clat, clon, strict=True)]).reshape(clat.shape)  # fmt: skip
+
+    return (lambda rows, la, lo: member(mask_pts, la, lo),
+            lambda rows, la, lo: (~member(bad, la, lo), member(dnu, la, lo)))  # fmt: skip
+
+
+def _full_grid(lat0=30, lat1=60, lon0=-20, lon1=20):
+    return [(a, b) for a in range(lat0, lat1 + 1, 5) for b in range(lon0, lon1 + 1, 5)]
+
+
 def test_grid_interpolation_reproduces_a_plane():
     # a plane over the IGPs is interpolated exactly, with four points and with any triangle
     rng = np.random.default_rng(1)
@@ -132,18 +209,79 @@ def test_grid_interpolation_reproduces_a_plane():
     plane = lambda la, lo: 2.0 + 0.03 * la - 0.01 * lo  # noqa: E731
     drop = rng.integers(0, 5, 200)  # 4: keep all four
 
-    def usable(rows, clat, clon):
+    def status(rows, clat, clon):
         u = np.ones(clat.shape, bool)
         k = drop[rows]
         u[np.flatnonzero(k < 4), k[k < 4]] = False
-        return u
+        return u, np.zeros(clat.shape, bool)
 
-    ok, clat, clon, w, mode = iono.select_and_interpolate(lat, lon, usable)
+    sel = iono.select_and_interpolate(lat, lon, lambda r, la, lo: np.ones(la.shape, bool), status)
+    ok, clat, clon, w, mode = sel.ok, sel.clat, sel.clon, sel.weights, sel.mode
     assert ok[drop == 4].all() and ok.sum() > 100 and np.allclose(w.sum(axis=1)[ok], 1.0)
     assert (w[ok] >= -1e-12).all()  # a triangle is used only when it contains the pierce point
     # corners may wrap in longitude; the test points stay away from the date line
     assert np.allclose((w * plane(clat, clon)).sum(axis=1)[ok], plane(lat, lon)[ok])
     assert ((mode[ok] == 0) == (drop[ok] == 4)).all()
+    assert (sel.fail[~ok] == iono.FAIL_OUTSIDE).all()  # one unusable corner and outside: no fall-back
+
+
+def test_grid_selection_follows_do229_a44102():
+    lat, lon = np.array([43.0]), np.array([1.0])  # cell 40-45 N, 0-5 E; x = 0.2, y = 0.6
+    # all four in the mask, NE corner (45, 5) not monitored: the pierce point is outside the triangle
+    # NW-SW-SE (x + y > 1 is false here, so it is inside): three-point interpolation without NE
+    s = iono.select_and_interpolate(lat, lon, *_grid(_full_grid(), bad=[(45, 5)]))
+    assert s.ok[0] and s.mode[0] == 1 and np.allclose(s.weights[0], [0, 0.6, 0.2, 0.2])
+    # SW corner (40, 0) unusable: the pierce point lies outside NE-NW-SE -> no correction, even though
+    # a 10x10 cell around it is complete and usable (the cell is chosen from the mask alone)
+    s = iono.select_and_interpolate(lat, lon, *_grid(_full_grid(), bad=[(40, 0)]))
+    assert not s.ok[0] and s.fail[0] == iono.FAIL_OUTSIDE
+    # two unusable corners -> none; a "don't use" corner -> none
+    s = iono.select_and_interpolate(lat, lon, *_grid(_full_grid(), bad=[(45, 5), (40, 5)]))
+    assert not s.ok[0] and s.fail[0] == iono.FAIL_UNUSABLE
+    s = iono.select_and_interpolate(lat, lon, *_grid(_full_grid(), dnu=[(45, 0)]))
+    assert not s.ok[0] and s.fail[0] == iono.FAIL_DONT_USE
+    # SW corner not in the mask: the triangle NE-NW-SE does not contain the pierce point; the first
+    # 10x10 cell (40-50 N, 0-10 E) has that corner too, so the next one, 5 deg west, is taken
+    pts = [p for p in _full_grid() if p != (40, 0)]
+    s = iono.select_and_interpolate(lat, lon, *_grid(pts))
+    assert s.ok[0] and s.mode[0] == 0
+    assert np.allclose(s.clat[0], [50, 50, 40, 40]) and np.allclose(s.clon[0], [5, -5, -5, 5])
+    assert np.allclose(s.weights[0], [0.18, 0.12, 0.28, 0.42])  # x = 0.6, y = 0.3
+    # ... and if that one also lacks a corner, the one 5 deg west and south
+    pts = [p for p in _full_grid() if p not in ((40, 0), (50, 5))]
+    s = iono.select_and_interpolate(lat, lon, *_grid(pts))
+    assert s.ok[0] and s.mode[0] == 0
+    assert np.allclose(s.clat[0], [45, 45, 35, 35]) and np.allclose(s.clon[0], [5, -5, -5, 5])
+    # three IGPs in the mask whose 5x5 triangle contains the pierce point: a three-point cell, and
+    # if one of those three is unusable there is no correction (no fourth corner to fall back on)
+    pts = [p for p in _full_grid() if p != (45, 5)]
+    s = iono.select_and_interpolate(lat, lon, *_grid(pts))
+    assert s.ok[0] and s.mode[0] == 1
+    s = iono.select_and_interpolate(lat, lon, *_grid(pts, bad=[(40, 0)]))
+    assert not s.ok[0] and s.fail[0] == iono.FAIL_UNUSABLE
+    # nothing in the mask
+    s = iono.select_and_interpolate(lat, lon, *_grid([]))
+    assert not s.ok[0] and s.fail[0] == iono.FAIL_NO_CELL
+
+
+def test_grid_selection_above_60_degrees_uses_5_by_10_cells():
+    # 62 N, 3 E: cell 60-65 N, 0-10 E; IGPs there are 10 deg apart in longitude
+    pts = [(a, b) for a in (55, 60, 65, 70) for b in range(-20, 21, 10)]
+    s = iono.select_and_interpolate(np.array([62.0]), np.array([3.0]), *_grid(pts))
+    assert s.ok[0] and s.mode[0] == 0
+    assert np.allclose(s.clat[0], [65, 65, 60, 60]) and np.allclose(s.clon[0], [10, 0, 0, 10])
+    assert np.allclose(s.weights[0], [0.3 * 0.4, 0.7 * 0.4, 0.7 * 0.6, 0.3 * 0.6])
+    s = iono.select_and_interpolate(np.array([80.0]), np.array([3.0]), *_grid(pts))
+    assert not s.ok[0] and s.fail[0] == iono.FAIL_POLAR
+
+
+def test_previous_other_value_finds_the_last_run_of_another_value():
+    key = np.array([1, 1, 1, 1, 2, 1, 2])
+    val = np.array([5, 5, 7, 7, 5, 5, 9])
+    t = np.array([0, 1, 2, 3, 0, 4, 1])
+    prev = previous_other_value(key, val, t, 0)
+    # key 1 in time order: 5 5 7 7 5 -> rows 2, 3 point at row 1; row 5 (back to 5) at row 3
+    assert prev.tolist() == [-1, -1, 1, 1, -1, 3, 4]
 
 
 def test_wls_recovers_a_known_offset_and_reports_few_satellites():
@@ -162,3 +300,5 @@ def test_wls_recovers_a_known_offset_and_reports_few_satellites():
 def test_bad_options_are_refused():
     with pytest.raises(ValueError, match="PA or NPA"):
         SbasOptions(mode="LPV")
+    with pytest.raises(ValueError, match="kepler or rv"):
+        SbasOptions(relativity="ecef")

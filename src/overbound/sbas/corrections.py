@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import polars as pl
 
-__all__ = ["US", "asof", "segments", "times_us"]
+__all__ = ["US", "asof", "previous_other_value", "previous_same_key", "segments", "times_us"]
 
 US = 1_000_000
 _SPAN = np.int64(1) << np.int64(42)  # 50 days of microseconds: key in the upper bits
@@ -36,6 +36,8 @@ def asof(key_tab: np.ndarray, t_tab: np.ndarray, key_q: np.ndarray, t_q: np.ndar
     subtracted so that (key, time) packs into one int64 (keys below 2^21).
     """
     key_tab = np.asarray(key_tab, np.int64)
+    if key_tab.size == 0:  # e.g. no MT 6 in a short window
+        return np.full(np.shape(key_q), -1, np.int64)
     packed = key_tab * _SPAN + np.clip(np.asarray(t_tab, np.int64) - base, 0, _SPAN - 1)
     order = np.argsort(packed, kind="stable")
     sp = packed[order]
@@ -56,6 +58,29 @@ def previous_same_key(key_tab: np.ndarray, t_tab: np.ndarray, base: int) -> np.n
     same = key_tab[order][1:] == key_tab[order][:-1]
     prev[order[1:][same]] = order[:-1][same]
     return prev
+
+
+def previous_other_value(
+    key_tab: np.ndarray, value_tab: np.ndarray, t_tab: np.ndarray, base: int
+) -> np.ndarray:
+    """For every row, the latest earlier row with the same key and a different value (-1 if none).
+
+    Used for the long-term corrections of the previous IODE: in (key, time) order the rows form
+    runs of equal value, and the row wanted is the last one of the run before the row's own.
+    """
+    key_tab = np.asarray(key_tab, np.int64)
+    value_tab = np.asarray(value_tab, np.int64)
+    packed = key_tab * _SPAN + np.clip(np.asarray(t_tab, np.int64) - base, 0, _SPAN - 1)
+    order = np.argsort(packed, kind="stable")
+    k, v = key_tab[order], value_tab[order]
+    start = np.ones(k.size, bool)
+    start[1:] = (k[1:] != k[:-1]) | (v[1:] != v[:-1])
+    run_first = np.flatnonzero(start)[np.cumsum(start) - 1]  # sorted index of each row's run start
+    before = run_first - 1
+    ok = (before >= 0) & (k[np.maximum(before, 0)] == k)
+    out = np.full(key_tab.size, -1, np.int64)
+    out[order[ok]] = order[before[ok]]
+    return out
 
 
 def segments(tag_us: np.ndarray, max_missing: int = 4) -> np.ndarray:

@@ -18,13 +18,19 @@ What is modelled (DO-229D appendix A and J; the time model is that of
   PRC + RRC (t - t_of); PRC time-out from the MT 7 indicator (Table A-8), RRC time-outs (the PRCs
   more than the smallest time-out of the mask apart, or propagated beyond 8 times their spacing);
   fast-correction history restarts after 4 or more missing messages and after a UDREI 14/15;
-* long-term corrections (MT 25, velocity codes 0 and 1) matched to the broadcast ephemeris by IODE;
+* long-term corrections (MT 25, velocity codes 0 and 1) matched to the broadcast ephemeris by IODE
+  (A.4.4.7); when the ephemeris of the newest IODE is not held (the SBAS changed IODE before the
+  user has it), the last correction of the previous IODE, with that ephemeris, until it times out
+  (Table A-25); the satellite clock's relativistic term per IS-GPS-200 20.3.3.3.3.1 (option
+  ``relativity="rv"``: -2 r.v / c^2 as gLAB, up to 1.7 cm different in range);
 * degradation (A.4.5.1): eps_fc = a_i (t - t_u + t_lat)^2 / 2, eps_rrc (0 for IODFs in sequence,
   else (a_i I_fc / 4 + B_rrc / dt) (t - t_of)), eps_ltc (velocity code 0:
   C_ltc_v0 floor((t - t_ltc) / I_ltc_v0); code 1: C_ltc_lsb + C_ltc_v1 max(0, t_0 - t, t - t_0 -
   I_ltc_v1) outside the validity interval), eps_er = 0 (PA); sigma_flt with the MT 10 RSS_UDRE
   flag and the MT 27 delta-UDRE (square regions; 1 when neither MT 27 nor MT 28 is received);
-* the grid ionosphere with sigma_UIVE from GIVE and eps_iono (C_iono_step floor((t - t_iono) /
+* the grid ionosphere (cells chosen from the IGP mask alone, then four-point, three-point or no
+  interpolation by the selected IGPs' state, A.4.4.10.2-3, :mod:`overbound.sbas.iono`) with
+  sigma_UIVE from GIVE and eps_iono (C_iono_step floor((t - t_iono) /
   I_iono) + C_iono_ramp (t - t_iono), RSS_iono), sigma_UIRE = F_pp sigma_UIVE;
 * MOPS troposphere and sigma_tropo; sigma_air of airborne accuracy designator A (DO-229D J.2.4:
   sigma_noise = 0.36 m, or 0.15 m for AAD-B, sigma_multipath = 0.13 + 0.53 exp(-E / 10 deg),
@@ -37,8 +43,11 @@ Satellites are not used, with the first reason in this order: ``no_pseudorange``
 ``udre_timeout``, ``not_monitored`` (UDREI 14), ``do_not_use`` (UDREI 15), ``udrei_pa`` (UDREI >= 12
 in PA), ``no_mt7``, ``mt7_timeout``, ``prc_timeout``, ``single_prc``, ``rrc_timeout``,
 ``rrc_propagation``, ``no_long_term``, ``long_term_timeout``, ``no_ephemeris_iode``,
-``elevation``, ``iono_mask_timeout``, ``no_iono``. In NPA the checks marked PA-only above make a
-satellite lose the correction instead (not yet: NPA currently applies the PA checks; see README).
+``elevation``, ``iono_mask_timeout``, ``no_igp_cell`` (no cell or triangle of IGPs in the mask),
+``iono_outside_triangle`` (one IGP of the cell unusable and the pierce point outside the other
+three), ``no_iono`` (other grid failures), ``too_few_satellites``. In NPA the checks marked PA-only
+above make a satellite lose the correction instead (not yet: NPA currently applies the PA checks; see
+README).
 
 Not handled yet: MT 28 covariance (delta-UDRE is 1 when MT 28 is present), MT 27 triangles,
 GEO ranging, pierce points poleward of 75 deg, the previous-mask (old IODP/IODI) fall-backs.
@@ -54,7 +63,7 @@ import pymap3d
 
 from overbound.io.rinex_nav import SPEED_OF_LIGHT, broadcast_state, rotate_earth
 from overbound.sbas import iono as ionomod
-from overbound.sbas.corrections import US, asof, previous_same_key, segments, times_us
+from overbound.sbas.corrections import US, asof, previous_other_value, previous_same_key, segments, times_us
 from overbound.sbas.messages import FC_TIMEOUT_NPA, FC_TIMEOUT_PA, SbasMessages
 from overbound.sbas.solution import K_H_NPA, K_H_PA, K_V_PA, weighted_least_squares
 from overbound.sbas.tropo import mops_tropo
@@ -68,8 +77,8 @@ REASONS = (
     "used", "no_pseudorange", "messages_lost", "no_mask", "mask_timeout", "not_in_mask", "no_mt10",
     "mt10_timeout", "no_fast_correction", "udre_timeout", "not_monitored", "do_not_use", "udrei_pa",
     "no_mt7", "mt7_timeout", "prc_timeout", "single_prc", "rrc_timeout", "rrc_propagation",
-    "no_long_term", "long_term_timeout", "no_ephemeris_iode", "elevation", "iono_mask_timeout", "no_iono",
-    "too_few_satellites",
+    "no_long_term", "long_term_timeout", "no_ephemeris_iode", "elevation", "iono_mask_timeout", "no_igp_cell",
+    "iono_outside_triangle", "no_iono", "too_few_satellites",
 )  # fmt: skip
 
 #: Message time-outs (s) for PA and NPA (DO-229D Table A-25), by message type.
@@ -88,6 +97,10 @@ class SbasOptions:
     geo : PRN of the GEO whose messages are used (None: the only one present).
     flight_time : GEO signal flight time (s) added to message tags (gLAB's default 0.12 s).
     aad : airborne accuracy designator, ``"A"`` (sigma_noise 0.36 m) or ``"B"`` (0.15 m).
+    relativity : satellite clock's relativistic term: ``"kepler"``, F e sqrt(A) sin(E_k) of
+        IS-GPS-200 20.3.3.3.3.1 (default; the model the SBAS corrections refer to), or ``"rv"``,
+        -2 r.v / c^2 from the broadcast position and velocity, as gLAB computes it. The two differ
+        by the orbit's harmonic perturbations, up to 1.7 cm in range on the EGNOS day.
     """
 
     mode: str = "PA"
@@ -95,12 +108,15 @@ class SbasOptions:
     geo: int | None = None
     flight_time: float = 0.12
     aad: str = "A"
+    relativity: str = "kepler"
 
     def __post_init__(self) -> None:
         if self.mode not in ("PA", "NPA"):
             raise ValueError(f"mode {self.mode!r}: expected PA or NPA")
         if self.aad not in ("A", "B"):
             raise ValueError(f"aad {self.aad!r}: expected A or B")
+        if self.relativity not in ("kepler", "rv"):
+            raise ValueError(f"relativity {self.relativity!r}: expected kepler or rv")
 
 
 @dataclass(frozen=True, slots=True)
@@ -155,7 +171,7 @@ def run_sbas(
     for name, cond in fast.pop("flags"):
         flag(cond, name)
     dudre = _delta_udre(ctx, m, lat, lon)
-    ltc = _long_term(ctx, m, mask, deg)
+    ltc = _long_term(ctx, m, mask, deg, eph)
     for name, cond in ltc.pop("flags"):
         flag(cond, name)
     geom = _geometry(ctx, eph, pr, ltc, rx, lat, lon)
@@ -163,6 +179,8 @@ def run_sbas(
     flag(geom["elev"] < np.deg2rad(opt.mask_deg), "elevation")
     grid = _iono(ctx, m, geom, lat, lon, deg)
     flag(grid["mask_timeout"], "iono_mask_timeout")
+    flag(grid["fail"] == ionomod.FAIL_NO_CELL, "no_igp_cell")
+    flag(grid["fail"] == ionomod.FAIL_OUTSIDE, "iono_outside_triangle")
     flag(~grid["ok"], "no_iono")
     doy = _day_of_year(t)
     tropo, sig_tropo = mops_tropo(lat, h, doy, geom["elev"])
@@ -225,6 +243,7 @@ def run_sbas(
             "eps_er": np.zeros(t.size),
             "sigma_flt": np.sqrt(sig2_flt),
             "iode": ltc["iode"],
+            "previous_iode": ltc["previous_iode"],
             "ltc_dx": ltc["dx"], "ltc_dy": ltc["dy"], "ltc_dz": ltc["dz"], "ltc_clock": C * ltc["daf0_t"],
             "ipp_lat": grid["ipp_lat"], "ipp_lon": grid["ipp_lon"], "iono_mode": grid["mode"],
             "obliquity": grid["fpp"],
@@ -272,7 +291,7 @@ class _Context:
 def _take(values: np.ndarray, rows: np.ndarray, fill: float = np.nan) -> np.ndarray:
     """``values[rows]`` with ``fill`` where rows < 0."""
     if values.size == 0:
-        return np.full(rows.shape, fill, dtype=float if isinstance(fill, float) else values.dtype)
+        return np.full(rows.shape, fill, dtype=float if isinstance(fill, float) else np.int64)
     out = values[np.maximum(rows, 0)]
     if out.dtype.kind in "iub":  # signed 64-bit (or float) so that differences and fills do not wrap
         out = out.astype(float if isinstance(fill, float) else np.int64)
@@ -392,7 +411,8 @@ def _fast(ctx: _Context, m: SbasMessages, mask: _Mask, seg_epoch: np.ndarray, de
     t_of = (ctx.t - tag_f) / US + 1.0  # t - t_of, t_of = tag - 1 s
     rrc = np.where(have2 & (ai > 0), (prc - prc_prev) / np.where(dt > 0, dt, np.nan), 0.0)
     in_seq = np.mod(iodf_f - _take(f["iodf"].to_numpy(), prev, fill=-9), 3) == 1
-    eps_rrc = np.where(in_seq | (ai == 0) | ~have2, 0.0, (ai * tmin / 4 + deg["brrc"] / dt) * t_of)
+    brrc_dt = np.divide(deg["brrc"], dt, out=np.full(dt.shape, np.inf), where=dt > 0)
+    eps_rrc = np.where(in_seq | (ai == 0) | ~have2, 0.0, (ai * tmin / 4 + brrc_dt) * t_of)
     eps_fc = ai * ((ctx.t - t_u) / US + 1.0 + tlat) ** 2 / 2
     no_fc = r < 0
     flags = [
@@ -454,13 +474,30 @@ def _delta_udre(ctx: _Context, m: SbasMessages, lat: float, lon: float) -> np.nd
     return np.where((r >= 0) & ~ctx.timed_out(s, r, 27), _take(value, r), 1.0)
 
 
-def _long_term(ctx: _Context, m: SbasMessages, mask: _Mask, deg: dict) -> dict:
-    """Long-term corrections (MT 25) and eps_ltc (DO-229D A.4.4.7, A.4.5.1.3)."""
+def _long_term(ctx: _Context, m: SbasMessages, mask: _Mask, deg: dict, eph: pl.DataFrame) -> dict:
+    """Long-term corrections (MT 25), their broadcast ephemeris and eps_ltc (DO-229D A.4.4.7, A.4.5.1.3).
+
+    The correction applies to the ephemeris with the IODE it names (A.4.4.7). When the SBAS moves
+    to a new IODE before the user holds that ephemeris (a merged daily file lacks the next day's
+    records, a receiver may not have decoded it yet), the last correction of the previous IODE
+    is used with the previous ephemeris until it times out (Table A-25: 240 s PA, 360 s NPA), as
+    a user keeps one correction per IODE during the SBAS's IODE transition (the SBAS broadcasts
+    both during the change-over). gLAB does the same.
+    """
     lt = m.long_term
     tl = times_us(lt["time"])
-    r = asof(lt["iodp"].to_numpy().astype(np.int64) * 64 + lt["position"].to_numpy(), tl,
-             mask.iodp * 64 + mask.position, ctx.t_avail, ctx.base)  # fmt: skip
+    key = lt["iodp"].to_numpy().astype(np.int64) * 64 + lt["position"].to_numpy()
+    iode_tab = lt["iode"].to_numpy().astype(np.int64)
+    r = asof(key, tl, mask.iodp * 64 + mask.position, ctx.t_avail, ctx.base)
     r = np.where(mask.iodp >= 0, r, -1)
+    timed_out = (r >= 0) & ctx.timed_out(lt, r, 25)
+    row_cur = _ephemeris_rows(ctx, eph, _take(iode_tab, r, fill=-1).astype(np.int64))
+    prev = _take(previous_other_value(key, iode_tab, tl, ctx.base), r, fill=-1).astype(np.int64)
+    prev = np.where((r >= 0) & ~timed_out & (row_cur < 0) & (prev >= 0), prev, -1)
+    prev = np.where((prev >= 0) & ~ctx.timed_out(lt, prev, 25), prev, -1)
+    row_prev = _ephemeris_rows(ctx, eph, _take(iode_tab, prev, fill=-1).astype(np.int64))
+    use_prev = (prev >= 0) & (row_prev >= 0)
+    r = np.where(use_prev, prev, r)
     names = ("dx", "dy", "dz", "daf0", "ddx", "ddy", "ddz", "daf1", "velocity_code")
     get = {c: _take(lt[c].to_numpy().astype(float), r) for c in names}
     t0 = _take(times_us(lt["t0"].fill_null(lt["time"])), r, fill=0)
@@ -469,9 +506,11 @@ def _long_term(ctx: _Context, m: SbasMessages, mask: _Mask, deg: dict) -> dict:
     v0 = deg["cltc_v0"] * np.floor(age_tx / deg["iltc_v0"])
     outside = np.maximum(0.0, np.maximum(-dt0, dt0 - deg["iltc_v1"]))
     v1 = np.where(outside > 0, deg["cltc_lsb"] + deg["cltc_v1"] * outside, 0.0)
-    flags = [("no_long_term", r < 0), ("long_term_timeout", (r >= 0) & ctx.timed_out(lt, r, 25))]
+    flags = [("no_long_term", r < 0), ("long_term_timeout", timed_out)]
     return {
-        "iode": _take(lt["iode"].to_numpy(), r, fill=-1).astype(np.int64),
+        "iode": _take(iode_tab, r, fill=-1).astype(np.int64),
+        "eph_row": np.where(use_prev, row_prev, row_cur),
+        "previous_iode": use_prev,
         "dx": get["dx"] + get["ddx"] * dt0,
         "dy": get["dy"] + get["ddy"] * dt0,
         "dz": get["dz"] + get["ddz"] * dt0,
@@ -486,7 +525,7 @@ def _geometry(ctx: _Context, eph: pl.DataFrame, pr: np.ndarray, ltc: dict, rx: n
     """Satellite position and clock at transmission (broadcast + long-term corrections), range,
     elevation and azimuth at the reference."""
     n = ctx.t.size
-    row = _ephemeris_rows(ctx, eph, ltc["iode"])
+    row = ltc["eph_row"]
     ok = (row >= 0) & np.isfinite(pr)
     out = {"row": row, "rho": np.full(n, np.nan), "clock": np.full(n, np.nan), "tgd": np.full(n, np.nan),
            "elev": np.full(n, -np.pi / 2), "azim": np.zeros(n)}  # fmt: skip
@@ -505,7 +544,13 @@ def _geometry(ctx: _Context, eph: pl.DataFrame, pr: np.ndarray, ltc: dict, rx: n
     e, nn, u = pymap3d.ecef2enu(rot[:, 0], rot[:, 1], rot[:, 2], lat, lon,
                                 float(pymap3d.ecef2geodetic(*rx)[2]))  # fmt: skip
     out["rho"][i] = rho
-    out["clock"][i] = st.clock + ltc["daf0_t"][i]
+    clock = st.clock
+    if ctx.opt.relativity == "rv":  # -2 r.v / c^2 from the orbit itself (gLAB's choice)
+        h = 1e-3
+        vel = (broadcast_state(eph, row[i], ctx.t[i], tx + h).position
+               - broadcast_state(eph, row[i], ctx.t[i], tx - h).position) / (2 * h)  # fmt: skip
+        clock = clock - st.relativistic - 2.0 * np.sum(st.position * vel, axis=-1) / C**2
+    out["clock"][i] = clock + ltc["daf0_t"][i]
     out["tgd"][i] = st.tgd
     out["elev"][i] = np.arctan2(u, np.hypot(e, nn))
     out["azim"][i] = np.arctan2(e, nn)
@@ -550,22 +595,33 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
     idx = np.flatnonzero(sel)
     flight_us = round(ctx.opt.flight_time * US)
 
-    def usable(rows: np.ndarray, clat: np.ndarray, clon: np.ndarray) -> np.ndarray:
+    # mask membership: (band, IODI, IGP position) of every MT 18 bit
+    mk_pos = mk.drop_nulls(("lat", "lon"))
+    member = np.unique(_mask_code(mk_pos["band"].to_numpy(), mk_pos["iodi"].to_numpy(),
+                                  _grid_key(mk_pos["lat"].to_numpy(), mk_pos["lon"].to_numpy())))  # fmt: skip
+    bands = np.unique(band_key)
+
+    def in_mask(rows: np.ndarray, clat: np.ndarray, clon: np.ndarray) -> np.ndarray:
+        tq = np.repeat(t_av[idx[rows]][:, None], 4, axis=1)
+        key = _grid_key(clat, clon)
+        out = np.zeros(clat.shape, bool)
+        for b in bands.tolist():
+            iodi_b = _band_iodi(mk, band_key, tmk, np.full(tq.shape, b, np.int64), tq, ctx.base)
+            out |= (iodi_b >= 0) & np.isin(_mask_code(b, iodi_b, key), member)
+        return out
+
+    def status(rows: np.ndarray, clat: np.ndarray, clon: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         tq = np.repeat(t_av[idx[rows]][:, None], 4, axis=1)
         r = asof(gkey, tg, _grid_key(clat, clon).ravel(), tq.ravel(), ctx.base).reshape(clat.shape)
         age = (tq + flight_us - _take(tg, r, fill=0)) / US - ctx.opt.flight_time
         band = _take(g["band"].to_numpy(), r, fill=0).astype(np.int64)
-        return (
-            (r >= 0)
-            & (age <= ctx.timeout(26))
-            & np.isfinite(_take(g["sigma2_give"].to_numpy(), r))
-            & ~_take(g["givd_dnu"].to_numpy(), r, fill=True).astype(bool)
-            & (_take(g["iodi"].to_numpy(), r, fill=-1) == _band_iodi(mk, band_key, tmk, band, tq, ctx.base))
-        )
+        current = (r >= 0) & (_take(g["iodi"].to_numpy(), r, fill=-1)
+                              == _band_iodi(mk, band_key, tmk, band, tq, ctx.base))  # fmt: skip
+        usable = current & (age <= ctx.timeout(26)) & np.isfinite(_take(g["sigma2_give"].to_numpy(), r))
+        return usable, current & _take(g["givd_dnu"].to_numpy(), r, fill=False).astype(bool)
 
-    ok_sub, clat, clon, w, mode_sub = ionomod.select_and_interpolate(
-        np.rad2deg(lat_pp[idx]), np.rad2deg(lon_pp[idx]), usable
-    )
+    sel = ionomod.select_and_interpolate(np.rad2deg(lat_pp[idx]), np.rad2deg(lon_pp[idx]), in_mask, status)
+    ok_sub, clat, clon, w, mode_sub = sel.ok, sel.clat, sel.clon, sel.weights, sel.mode
     k = _grid_key(clat, clon)
     tq = np.repeat(t_av[idx][:, None], 4, axis=1)
     r = asof(gkey, tg, k.ravel(), tq.ravel(), ctx.base).reshape(k.shape)
@@ -581,6 +637,8 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
     ok[idx] = ok_sub
     mode = np.full(n, -1)
     mode[idx] = mode_sub
+    fail = np.zeros(n, np.int64)
+    fail[idx] = sel.fail
     slant = np.full(n, np.nan)
     slant[idx] = np.where(ok_sub, fpp[idx] * vert, np.nan)
     s2uire = np.full(n, np.nan)
@@ -588,7 +646,7 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
     # mask time-out: the latest MT 18 of any band older than its time-out
     last18 = asof(np.zeros(tmk.size, np.int64), tmk, np.zeros(n, np.int64), t_av, ctx.base)
     mask_to = (last18 >= 0) & (ctx.age(_take(tmk, last18, fill=0)) > ctx.timeout(18))
-    return {"ok": ok, "mode": mode, "slant": slant, "sigma2_uire": s2uire, "fpp": fpp,
+    return {"ok": ok, "mode": mode, "fail": fail, "slant": slant, "sigma2_uire": s2uire, "fpp": fpp,
             "mask_timeout": mask_to,
             "ipp_lat": np.rad2deg(lat_pp), "ipp_lon": np.rad2deg(lon_pp)}  # fmt: skip
 
@@ -598,6 +656,11 @@ def _grid_key(lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
     i = np.round((np.asarray(lat, float) + 90) / 5).astype(np.int64)
     j = np.round((np.asarray(lon, float) + 180) / 5).astype(np.int64) % 72
     return i * 72 + j
+
+
+def _mask_code(band: np.ndarray | int, iodi: np.ndarray, key: np.ndarray) -> np.ndarray:
+    """One integer per (band, IODI, IGP position)."""
+    return (np.asarray(band, np.int64) * 4 + np.asarray(iodi, np.int64)) * 4096 + np.asarray(key, np.int64)
 
 
 def _band_iodi(mk: pl.DataFrame, band_key: np.ndarray, tmk: np.ndarray, band_q: np.ndarray, t_q: np.ndarray,

@@ -5,12 +5,12 @@ central angle psi_pp = pi/2 - E - asin(R_e / (R_e + h_I) cos E), the pierce poin
 longitude from the user's, the azimuth A and psi_pp, and the obliquity factor
 F_pp = [1 - (R_e cos E / (R_e + h_I))^2]^(-1/2).
 
-Cell selection (A.4.4.10.2), for |phi_pp| <= 60 deg: the 5x5 deg cell around the pierce point
-if its four IGPs are usable, else a triangle of three of them that contains the pierce point,
-else the same with the 10x10 deg cell; for 60 < |phi_pp| <= 75 deg the 5 deg (latitude) by
-10 deg (longitude) cell, then the 10x10 cell. "Usable" is decided by the caller (in the mask,
-monitored, not timed out, IODI matching). Pierce points poleward of 75 deg are not handled here
-(flagged unavailable; no user of the EGNOS data here has one).
+Cell selection (A.4.4.10.2), for |phi_pp| <= 75 deg: from the IGP mask alone, the 5x5 deg cell
+(5x10 poleward of 60 deg) around the pierce point, else a triangle of three of its IGPs that
+contains it, else a 10x10 cell, else a 10x10 triangle; then the selected IGPs' state decides
+between four-point, three-point and no interpolation (details in :func:`select_and_interpolate`).
+Pierce points poleward of 75 deg are not handled here (flagged unavailable; no user of the
+EGNOS data here has one).
 
 Interpolation (A.4.4.10.3): with x, y the pierce point's position within the cell (0..1 from
 its south-west corner), the four-point weights are xy (NE), (1-x)y (NW), (1-x)(1-y) (SW),
@@ -22,10 +22,14 @@ which is what DO-229 writes out corner by corner.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["H_IONO", "R_EARTH", "obliquity", "pierce_point", "select_and_interpolate"]
+__all__ = [
+    "FAIL_DONT_USE", "FAIL_NO_CELL", "FAIL_OUTSIDE", "FAIL_POLAR", "FAIL_UNUSABLE", "H_IONO", "R_EARTH",
+    "GridSelection", "obliquity", "pierce_point", "select_and_interpolate",
+]  # fmt: skip
 
 R_EARTH = 6378136.3  # m
 H_IONO = 350_000.0  # m
@@ -58,17 +62,6 @@ def _wrap(lon: np.ndarray) -> np.ndarray:
     return (lon + 180) % 360 - 180
 
 
-def _cell(lat: np.ndarray, lon: np.ndarray, dlat: float, dlon: float):
-    """South-west corner, corner coordinates (n, 4) and (x, y) of the pierce point in the cell."""
-    lat0 = np.floor(lat / dlat) * dlat
-    lon0 = np.floor(lon / dlon) * dlon
-    x = (lon - lon0) / dlon
-    y = (lat - lat0) / dlat
-    clat = lat0[:, None] + _CORNERS[:, 1] * dlat
-    clon = _wrap(lon0[:, None] + _CORNERS[:, 0] * dlon)
-    return clat, clon, x, y
-
-
 def _triangle_weights(x: np.ndarray, y: np.ndarray, missing: np.ndarray) -> np.ndarray:
     """Barycentric weights (n, 4) of (x, y) in the right triangle of the corners other than ``missing``.
 
@@ -86,57 +79,147 @@ def _triangle_weights(x: np.ndarray, y: np.ndarray, missing: np.ndarray) -> np.n
     return table[missing, np.arange(x.size)]
 
 
+class GridSelection(NamedTuple):
+    """Result of :func:`select_and_interpolate` (arrays over the pierce points).
+
+    ok : a correction is available. clat, clon : (n, 4) coordinates of the selected cell's corners
+    (NE, NW, SW, SE). weights : (n, 4), 0 for a corner not used. mode : 0 four points, 1..4 the
+    corner left out of a triangle (gLAB's code), -1 none. fail : why not (``FAIL_*``, 0 if ok).
+    """
+
+    ok: np.ndarray
+    clat: np.ndarray
+    clon: np.ndarray
+    weights: np.ndarray
+    mode: np.ndarray
+    fail: np.ndarray
+
+
+#: Failure codes of :func:`select_and_interpolate`.
+FAIL_NO_CELL = 1  # no cell or triangle of IGPs in the mask around the pierce point
+FAIL_UNUSABLE = 2  # the selected cell has too few usable IGPs
+FAIL_OUTSIDE = 3  # one IGP of a four-point cell unusable, the pierce point outside the other three
+FAIL_DONT_USE = 4  # a selected IGP is "don't use"
+FAIL_POLAR = 5  # pierce point poleward of 75 deg (not implemented)
+
+
+def _candidates(lat: np.ndarray, lon: np.ndarray) -> list[tuple[np.ndarray, np.ndarray, float, float]]:
+    """Cells to try after the first one, as (south-west latitude, longitude, dlat, dlon), in order.
+
+    Every 10x10 deg cell that contains the pierce point and has its corners on the 5-degree IGP
+    grid: south-west corner at the first cell's, then 5 deg west, 5 deg west and south, 5 deg
+    south (for 60 < |lat| <= 75, where the IGPs are 10 deg apart in longitude, the first and
+    5 deg south). DO-229D A.4.4.10.2 asks for "any" such cell; this order is gLAB's.
+    """
+    mid = np.abs(lat) <= 60
+    lat0 = np.floor(lat / 5) * 5
+    lon0 = np.where(mid, np.floor(lon / 5) * 5, np.floor(lon / 10) * 10)
+    west = np.where(mid, 5.0, np.nan)  # no westward shift where IGPs are 10 deg apart
+    return [
+        (lat0, lon0, 10.0, 10.0),
+        (lat0, lon0 - west, 10.0, 10.0),
+        (lat0 - 5, lon0 - west, 10.0, 10.0),
+        (lat0 - 5, lon0, 10.0, 10.0),
+    ]
+
+
+def _triangle_ok(sel: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """For cells with exactly three selected corners: the left-out corner, weights, and inside."""
+    missing = np.argmin(sel, axis=1)
+    w3 = _triangle_weights(x, y, missing)
+    return missing, w3, (w3 >= -1e-12).all(axis=1)
+
+
 def select_and_interpolate(
     lat_pp_deg: np.ndarray,
     lon_pp_deg: np.ndarray,
-    usable: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray],
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Select the IGPs around each pierce point and their interpolation weights.
+    in_mask: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray],
+    status: Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+) -> GridSelection:
+    """Select the IGPs around each pierce point and their interpolation weights (DO-229D A.4.4.10.2-3).
+
+    The cell is chosen from the IGP mask alone, whatever the IGPs' state (A.4.4.10.2): for
+    |lat| <= 60 deg (a) the 5x5 deg cell around the pierce point if its four IGPs are in the mask,
+    (b) else its three IGPs in the mask if their triangle contains the pierce point, (c) else a
+    10x10 deg cell around it with four IGPs in the mask, (d) else a 10x10 triangle of three that
+    contains it; for 60 < |lat| <= 75 the same with the 5 (latitude) by 10 deg cell first. Then
+    the selected IGPs' state decides: any "don't use" -> no correction; four selected and one not
+    usable (not monitored, timed out, no data) -> three-point interpolation if the pierce point
+    lies in the triangle of the other three, else no correction (there is no fall-back to another
+    cell); four with two or more unusable, or three with any unusable -> no correction.
 
     Parameters
     ----------
     lat_pp_deg, lon_pp_deg : pierce points (deg), shape (n,).
-    usable : ``usable(rows, lat, lon)`` for the pierce points ``rows`` (indices into the inputs)
-        and their IGP coordinates (len(rows), 4): True where the IGP can be used there (the caller
-        checks mask, IODI, GIVEI and time-outs at each pierce point's epoch).
-
-    Returns
-    -------
-    ok : (n,) a cell or triangle was found.
-    clat, clon : (n, 4) IGP coordinates in the order NE, NW, SW, SE.
-    weights : (n, 4) interpolation weights (0 for a corner that is not used).
-    mode : (n,) 0 for four points, 1..4 for the corner left out of a triangle (gLAB's code),
-        -1 where nothing was found.
+    in_mask : ``in_mask(rows, lat, lon)`` -> (len(rows), 4) bool, the IGP at (lat, lon) is in the
+        mask in force at pierce point ``rows``' epoch (``rows`` index the inputs).
+    status : ``status(rows, lat, lon)`` -> (usable, dont_use), each (len(rows), 4) bool.
     """
     lat = np.asarray(lat_pp_deg, float)
     lon = np.asarray(lon_pp_deg, float)
     n = lat.size
-    ok = np.zeros(n, bool)
+    found = np.zeros(n, bool)
     clat = np.zeros((n, 4))
     clon = np.zeros((n, 4))
-    weights = np.zeros((n, 4))
-    mode = np.full(n, -1)
+    x = np.zeros(n)
+    y = np.zeros(n)
+    sel = np.zeros((n, 4), bool)
     mid = np.abs(lat) <= 60
     high = (np.abs(lat) > 60) & (np.abs(lat) <= 75)
-    tries = ((mid, 5.0, 5.0), (high, 5.0, 10.0), (mid | high, 10.0, 10.0))  # first cell, then 10x10
-    for region, dlat, dlon in tries:
-        todo = region & ~ok
-        if not todo.any():
-            continue
-        idx = np.flatnonzero(todo)
-        la, lo, x, y = _cell(lat[idx], lon[idx], dlat, dlon)
-        use = usable(idx, la, lo)
-        n_use = use.sum(axis=1)
-        four = n_use == 4
-        w4 = np.stack([x * y, (1 - x) * y, (1 - x) * (1 - y), x * (1 - y)], axis=-1)
-        missing = np.argmin(use, axis=1)
-        w3 = _triangle_weights(x, y, missing)
-        inside = (w3 >= -1e-12).all(axis=1)
-        three = (n_use == 3) & inside
-        good = four | three
-        sel = idx[good]
-        ok[sel] = True
-        clat[sel], clon[sel] = la[good], lo[good]
-        weights[sel] = np.where(four[good, None], w4[good], w3[good])
-        mode[sel] = np.where(four[good], 0, missing[good] + 1)
-    return ok, clat, clon, weights, mode
+    first = (np.floor(lat / 5) * 5, np.where(mid, np.floor(lon / 5) * 5, np.floor(lon / 10) * 10),
+             5.0, np.where(mid, 5.0, 10.0))  # fmt: skip
+    todo_all = mid | high
+
+    def take(idx: np.ndarray, la0: np.ndarray, lo0: np.ndarray, dlat: float, dlon: np.ndarray,
+             want: int) -> None:  # fmt: skip
+        """Try one cell for the pierce points idx; keep those with ``want`` (4 or 3) corners in the mask."""
+        ok_geom = np.isfinite(lo0)
+        idx, la0, lo0, dlon = idx[ok_geom], la0[ok_geom], lo0[ok_geom], dlon[ok_geom]
+        if idx.size == 0:
+            return
+        la = la0[:, None] + _CORNERS[:, 1] * dlat
+        lo = _wrap(lo0[:, None] + _CORNERS[:, 0] * dlon[:, None])
+        m = in_mask(idx, la, lo)
+        xx = (_wrap(lon[idx] - lo0)) / dlon
+        yy = (lat[idx] - la0) / dlat
+        if want == 4:
+            good = m.all(axis=1)
+        else:
+            good = (m.sum(axis=1) == 3) & _triangle_ok(m, xx, yy)[2]
+        g = idx[good]
+        found[g] = True
+        clat[g], clon[g], x[g], y[g], sel[g] = la[good], lo[good], xx[good], yy[good], m[good]
+
+    idx = np.flatnonzero(todo_all)
+    for want in (4, 3):  # (a), (b): the first cell
+        rest = idx[~found[idx]]
+        take(rest, first[0][rest], first[1][rest], first[2], first[3][rest], want)
+    cands = _candidates(lat, lon)
+    for want in (4, 3):  # (c), (d): the 10x10 cells
+        for la0, lo0, dlat, dlon in cands:
+            rest = idx[~found[idx]]
+            take(rest, la0[rest], lo0[rest], dlat, np.full(rest.size, dlon), want)
+
+    fail = np.where(todo_all, FAIL_NO_CELL, FAIL_POLAR)
+    ok = np.zeros(n, bool)
+    weights = np.zeros((n, 4))
+    mode = np.full(n, -1)
+    f = np.flatnonzero(found)
+    if f.size:
+        usable, dnu = status(f, clat[f], clon[f])
+        s = sel[f]
+        bad = s & ~usable
+        n_sel, n_bad = s.sum(axis=1), bad.sum(axis=1)
+        four = (n_sel == 4) & (n_bad == 0)
+        tri_set = np.where((n_sel == 4)[:, None] & (n_bad == 1)[:, None], s & ~bad, s)
+        missing, w3, inside = _triangle_ok(tri_set, x[f], y[f])
+        three = ((n_sel == 3) & (n_bad == 0)) | ((n_sel == 4) & (n_bad == 1) & inside)
+        dont = (s & dnu).any(axis=1)
+        good = (four | three) & ~dont
+        w4 = np.stack([x[f] * y[f], (1 - x[f]) * y[f], (1 - x[f]) * (1 - y[f]), x[f] * (1 - y[f])], axis=-1)
+        ok[f] = good
+        weights[f] = np.where((four & good)[:, None], w4, np.where((three & good)[:, None], w3, 0.0))
+        mode[f] = np.where(four & good, 0, np.where(three & good, missing + 1, -1))
+        outside = (n_sel == 4) & (n_bad == 1) & ~inside
+        fail[f] = np.select([good, dont, outside], [0, FAIL_DONT_USE, FAIL_OUTSIDE], FAIL_UNUSABLE)
+    return GridSelection(ok, clat, clon, weights, mode, fail)

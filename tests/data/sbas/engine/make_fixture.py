@@ -10,6 +10,12 @@ Run from the repository root::
    ``../ems/h02.ems.gz``); ``brdc0140.19n.gz``: the day's broadcast ephemerides.
 3. ``glab_h02-04.out.gz``: gLAB's processing of exactly these files (command in PROVENANCE.md),
    reduced to its INFO, SBASOUT, SBASVAR and SBASUNSEL lines.
+4. The evening window 19:30:00-22:09:59 GPST, for both synthetic stations: ``ems_1930-2210.ems.gz``
+   (the EMS lines of hours 19-22 inside the window), ``SYNT0140_1930-2210.19o.gz`` and
+   ``SYNB0140_1930-2210.19o.gz`` (Toulouse, Brussels), and gLAB's processing of each,
+   ``glab_synt_1930-2210.out.gz`` and ``glab_synb_1930-2210.out.gz``. The window holds PRN 26's
+   ionospheric triangle rejections at Toulouse (19:46-19:54) and the IODE change-over of 22:03
+   for which the daily navigation file has no new ephemerides.
 All gzip files are written without name or time stamp, so they do not depend on the run.
 """
 
@@ -45,6 +51,39 @@ def cut_obs(text: str, first: str = " 19  1 14  2  0  0", last: str = " 19  1 14
     return text[:end] + text[start:stop]
 
 
+def run_glab(glab: str, obs_name: str, obs: str, ems: bytes) -> bytes:
+    """gLAB's output for ``obs`` with ``ems`` and the day's navigation file, the KEEP lines only."""
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        (work / obs_name).write_text(obs)
+        (work / "egnos123.ems").write_bytes(ems)
+        (work / "brdc0140.19n").write_bytes((DATA / "brdc0140.19n").read_bytes())
+        inputs = ["-input:obs", obs_name, "-input:nav", "brdc0140.19n", "-input:sbas1f", "egnos123.ems"]
+        cmd = [glab, *inputs, *GLAB_OPTIONS, "-output:file", "full.out"]
+        subprocess.run(cmd, cwd=work, check=True, stdout=subprocess.DEVNULL)
+        lines = (work / "full.out").read_text().splitlines(keepends=True)
+    kept = [ln for ln in lines if ln.split(None, 1)[0].rstrip("*") in KEEP and "built on" not in ln]
+    return "".join(kept).encode()
+
+
+def cut_ems(data: bytes, first: str = "19 01 14 19 30 00", last: str = "19 01 14 22 10 00") -> bytes:
+    """EMS lines whose time (columns 2-7) lies in [first, last)."""
+    lines = data.decode().splitlines(keepends=True)
+    return "".join(ln for ln in lines if first <= ln[4:21] < last).encode()
+
+
+def evening(glab: str) -> None:
+    """The 19:30-22:10 window for Toulouse and Brussels (item 4 of the module docstring)."""
+    ems = cut_ems(b"".join((DATA / "ems" / f"h{h}.ems").read_bytes() for h in (19, 20, 21, 22)))
+    write_gz(OUT / "ems_1930-2210.ems.gz", ems)
+    for station in ("SYNT", "SYNB"):
+        full = gzip.decompress((DATA / "synthetic-obs" / f"{station}0140.19o.gz").read_bytes()).decode()
+        obs = cut_obs(full, " 19  1 14 19 30  0", " 19  1 14 22 10  0")
+        write_gz(OUT / f"{station}0140_1930-2210.19o.gz", obs.encode())
+        out = run_glab(glab, f"{station}0140.19o", obs, ems)
+        write_gz(OUT / f"glab_{station.lower()}_1930-2210.out.gz", out)
+
+
 def main(glab: str) -> None:
     obs = cut_obs(gzip.decompress((DATA / "synthetic-obs" / "SYNT0140.19o.gz").read_bytes()).decode())
     write_gz(OUT / "SYNT0140_h02-04.19o.gz", obs.encode())
@@ -68,3 +107,4 @@ def main(glab: str) -> None:
 
 if __name__ == "__main__":
     main(sys.argv[1] if len(sys.argv) > 1 else "gLAB_linux")
+    evening(sys.argv[1] if len(sys.argv) > 1 else "gLAB_linux")
