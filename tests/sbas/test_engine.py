@@ -7,6 +7,7 @@ Fixture (tests/data/sbas/engine, PROVENANCE.md there): synthetic noise-free Toul
 
 from __future__ import annotations
 
+import datetime as dt
 import functools
 import gzip
 from pathlib import Path
@@ -302,3 +303,101 @@ def test_bad_options_are_refused():
         SbasOptions(mode="LPV")
     with pytest.raises(ValueError, match="kepler or rv"):
         SbasOptions(relativity="ecef")
+
+
+# --- NPA mode -----------------------------------------------------------------------------------------
+#: gLAB's NPA fall-backs that DO-229D does not have (MOPS-C sigma_flt of 60 m without fast or long-term
+#: correction, Klobuchar where the grid fails, any broadcast IODE), as our reasons for not using the row.
+GLAB_ONLY_NPA = {"no_iono", "iono_outside_triangle", "no_mt7", "no_long_term", "no_ephemeris_iode",
+                 "too_few_satellites"}  # fmt: skip
+
+
+@functools.cache
+def _evening_inputs():
+    obs, _ = read_rinex_obs(FIX / "SYNT0140_1930-2210.19o.gz")
+    return obs, decode(read_ems([FIX / "ems_1930-2210.ems.gz"])[0])
+
+
+def _run(msgs, mode: str):
+    obs, _ = _evening_inputs()
+    opt = SbasOptions(mode=mode, relativity="rv")
+    return run_sbas(obs.table, _nav().table, msgs, obs.header.approx_position, options=opt)
+
+
+def test_npa_matches_glab_npa_where_do229_defines_it():
+    _, msgs = _evening_inputs()
+    run = _run(msgs, "NPA")
+    out, var, _ = _read_glab(FIX / "glab_synt_1930-2210_npa.out.gz")
+    sats = _sod(run.satellites).with_columns(pl.col("prn").cast(pl.Int64))
+    j = sats.join(
+        var.select("sod", "prn", "sigma_flt").with_columns(glab=True), on=("sod", "prn"), how="left"
+    )
+    assert j.filter("used" & pl.col("glab").is_null()).height == 0  # nothing gLAB does not use
+    extra = j.filter(pl.col("glab") & ~pl.col("used"))
+    assert set(extra["reason"]) <= GLAB_ONLY_NPA and extra.height < 0.05 * var.height
+    # without fast or long-term corrections gLAB's row is its MOPS-C 60 m sigma_flt
+    no_corr = extra.filter(pl.col("reason").is_in(["no_mt7", "no_long_term", "no_ephemeris_iode"]))
+    assert no_corr.height > 0 and (no_corr["sigma_flt_right"] == 60.0).all()
+    both = sats.filter("used").join(var, on=("sod", "prn"), suffix="_glab")
+    for name in ("sigma", "sigma_flt", "eps_er", "sigma_uire", "delta_udre"):
+        assert float((both[name] - both[f"{name}_glab"]).abs().max()) < 0.005, name
+    # epochs with the same satellites: HPL with K_H = 6.18, VPL with K_V = 5.33
+    used = both.group_by("sod").len()
+    full = (
+        var.group_by("sod")
+        .len()
+        .join(used, on="sod", suffix="_ours")
+        .filter(pl.col("len") == pl.col("len_ours"))
+    )
+    e = _sod(run.epochs).join(out, on="sod", suffix="_glab").join(full, on="sod")
+    assert e.height > 0.9 * out.height and (e["mode"] == "NPA").all()
+    assert float((e["hpl"] - e["hpl_glab"]).abs().max()) < 0.001
+    assert float((e["vpl"] - e["vpl_glab"]).abs().max()) < 0.001
+
+
+def _without(msgs, tables: tuple[str, ...], first: str, last: str):
+    """The messages with the rows of ``tables`` (all tables if empty, the log included, so that the
+    messages count as lost) between two times of 2019-01-14 removed."""
+    t0, t1 = (dt.datetime.fromisoformat(f"2019-01-14T{x}") for x in (first, last))
+    keep = ~pl.col("time").is_between(t0, t1)
+    out = {k: v.filter(keep) if not tables or k in tables else v for k, v in msgs.tables().items()}
+    return type(msgs)(**out, counts=msgs.counts)
+
+
+def test_npa_keeps_satellites_through_a_short_message_gap():
+    _, msgs = _evening_inputs()
+    cut = _without(msgs, (), "20:29:51", "20:30:00")  # ten seconds of nothing before the epoch
+    at = pl.datetime(2019, 1, 14, 20, 30, 0)
+    pa = _run(cut, "PA").satellites.filter(pl.col("time") == at)
+    npa = _run(cut, "NPA").satellites.filter(pl.col("time") == at)
+    assert not pa["used"].any() and (pa["reason"] == "messages_lost").sum() > 0
+    assert npa["used"].sum() >= 5  # fast corrections 10 s old: within every NPA time-out
+
+
+def test_npa_long_term_correction_past_its_pa_timeout_adds_eps_er():
+    _, msgs = _evening_inputs()
+    deg = msgs.degradation.with_columns(cer=pl.lit(2.5))  # EGNOS broadcasts C_er = 0; give it a value
+    cut = _without(type(msgs)(**(msgs.tables() | {"degradation": deg}), counts=msgs.counts),
+                   ("long_term",), "20:30:00", "20:36:00")  # fmt: skip
+    late = pl.col("time").is_between(
+        pl.datetime(2019, 1, 14, 20, 34, 30), pl.datetime(2019, 1, 14, 20, 35, 30)
+    )
+    pa = _run(cut, "PA").satellites.filter(late)
+    npa = _run(cut, "NPA").satellites.filter(late)
+    assert (pa["reason"] == "long_term_timeout").sum() > 0  # 270-330 s old: past 240 s
+    assert not (npa["reason"] == "long_term_timeout").any()  # ... but within 360 s
+    used = npa.filter("used")
+    assert used.height > 0 and (used["eps_er"] == 2.5).all()
+    before = _run(cut, "NPA").satellites.filter(pl.col("time") < pl.datetime(2019, 1, 14, 20, 33, 0), "used")
+    assert (before["eps_er"] == 0).all()
+
+
+def test_npa_without_mt10_uses_the_8_m_sigma_flt():
+    _, msgs = _evening_inputs()
+    cut = _without(msgs, ("degradation",), "19:00:00", "23:00:00")
+    pa = _run(cut, "PA").satellites
+    npa = _run(cut, "NPA").satellites.filter("used")
+    assert not pa["used"].any() and (pa["reason"] == "no_mt10").sum() > 0
+    assert npa.height > 0
+    np.testing.assert_allclose(npa["sigma_flt"], npa["sigma_udre"] * npa["delta_udre"] + 8.0, rtol=1e-12)
+    assert (npa["eps_fc"] == 0).all() and (npa["eps_ltc"] == 0).all()

@@ -26,7 +26,7 @@ What is modelled (DO-229D appendix A and J; the time model is that of
 * degradation (A.4.5.1): eps_fc = a_i (t - t_u + t_lat)^2 / 2, eps_rrc (0 for IODFs in sequence,
   else (a_i I_fc / 4 + B_rrc / dt) (t - t_of)), eps_ltc (velocity code 0:
   C_ltc_v0 floor((t - t_ltc) / I_ltc_v0); code 1: C_ltc_lsb + C_ltc_v1 max(0, t_0 - t, t - t_0 -
-  I_ltc_v1) outside the validity interval), eps_er = 0 (PA); sigma_flt with the MT 10 RSS_UDRE
+  I_ltc_v1) outside the validity interval), eps_er (below, NPA); sigma_flt with the MT 10 RSS_UDRE
   flag and the MT 27 delta-UDRE (square regions; 1 when neither MT 27 nor MT 28 is received);
 * the grid ionosphere (cells chosen from the IGP mask alone, then four-point, three-point or no
   interpolation by the selected IGPs' state, A.4.4.10.2-3, :mod:`overbound.sbas.iono`) with
@@ -45,9 +45,26 @@ in PA), ``no_mt7``, ``mt7_timeout``, ``prc_timeout``, ``single_prc``, ``rrc_time
 ``rrc_propagation``, ``no_long_term``, ``long_term_timeout``, ``no_ephemeris_iode``,
 ``elevation``, ``iono_mask_timeout``, ``no_igp_cell`` (no cell or triangle of IGPs in the mask),
 ``iono_outside_triangle`` (one IGP of the cell unusable and the pierce point outside the other
-three), ``no_iono`` (other grid failures), ``too_few_satellites``. In NPA the checks marked PA-only
-above make a satellite lose the correction instead (not yet: NPA currently applies the PA checks; see
-README).
+three), ``no_iono`` (other grid failures), ``too_few_satellites``.
+
+NPA mode (``mode="NPA"``) differs from PA as DO-229D prescribes:
+
+* HPL with K_H = 6.18 (J.1; VPL keeps K_V = 5.33 and is reported, not used for NPA);
+* the NPA column of the time-outs: Table A-25 (MT 6/UDRE 18 s, MT 7 and MT 10 360 s, MT 25 360 s,
+  the others as PA) and Table A-8 (fast corrections by MT 7 indicator, 18-180 s);
+* the PA-only checks keep the satellite: 4 or more missing messages (``messages_lost``, 2.1.1.4.12)
+  end PA only; UDREI 12-13 (``udrei_pa``) are usable; without MT 10, or with MT 10 timed out,
+  sigma_flt = (sigma_UDRE delta_UDRE + 8 m)^2 and the MT 10 degradation terms (eps_fc, eps_rrc,
+  eps_ltc, eps_iono) are not applied (A.4.5.1);
+* eps_er = C_er (MT 10) once the fast or the long-term correction is older than its PA time-out
+  but not its NPA one (A.4.5.1.4).
+
+gLAB's NPA goes further than DO-229D, and this engine does not follow it: where the grid fails it
+uses the Klobuchar model (DO-229D allows the GPS broadcast model in NPA, with sigma_UIRE of J.2.3,
+but the RINEX navigation reader does not keep the ION ALPHA/BETA coefficients yet), and without
+fast or long-term correction it uses the satellite with the MOPS-C sigma_flt of 60 m and any
+broadcast IODE. On the evening Toulouse window those are the only rows gLAB uses and this engine
+does not (3 % of them); elsewhere the sigmas and PLs agree (tests/sbas/test_engine.py).
 
 Not handled yet: MT 28 covariance (delta-UDRE is 1 when MT 28 is present), MT 27 triangles,
 GEO ranging, pierce points poleward of 75 deg, the previous-mask (old IODP/IODI) fall-backs.
@@ -84,6 +101,8 @@ REASONS = (
 #: Message time-outs (s) for PA and NPA (DO-229D Table A-25), by message type.
 TIMEOUT_PA = {1: 600, 6: 12, 7: 240, 10: 240, 18: 1200, 25: 240, 26: 600, 27: 86400}
 TIMEOUT_NPA = {1: 600, 6: 18, 7: 360, 10: 360, 18: 1200, 25: 360, 26: 600, 27: 86400}
+#: sigma_flt offset (m) when MT 10 is not held (DO-229D A.4.5.1: (sigma_UDRE delta_UDRE + 8 m)^2; NPA).
+SIGMA_FLT_NO_MT10 = 8.0
 
 
 @dataclass(frozen=True, slots=True)
@@ -157,16 +176,21 @@ def run_sbas(
     def flag(cond: np.ndarray, name: str) -> None:
         reason[(reason == 0) & cond] = REASONS.index(name)
 
+    pa = opt.mode == "PA"
     flag(~np.isfinite(pr), "no_pseudorange")
     seg_epoch, lost = _message_loss(ctx, m)
-    flag(lost, "messages_lost")
+    flag(lost & pa, "messages_lost")  # DO-229D 2.1.1.4.12: 4 lost messages end PA/APV only
     mask = _mask_state(ctx, m)
     for name, cond in mask.flags:
         flag(cond, name)
     mt10 = _latest(ctx, m.degradation, 10)
-    flag(mt10 < 0, "no_mt10")
-    flag((mt10 >= 0) & ctx.timed_out(m.degradation, mt10, 10), "mt10_timeout")
-    deg = {c: _take(m.degradation[c].to_numpy().astype(float), mt10) for c in m.degradation.columns[2:]}
+    mt10_out = (mt10 >= 0) & ctx.timed_out(m.degradation, mt10, 10)
+    flag((mt10 < 0) & pa, "no_mt10")
+    flag(mt10_out & pa, "mt10_timeout")
+    no_mt10 = (mt10 < 0) | mt10_out  # NPA only from here on: sigma_flt with the 8 m term, no degradation
+    deg = {c: _take(m.degradation[c].to_numpy().astype(float), np.where(no_mt10, -1, mt10))
+           for c in m.degradation.columns[2:]}  # fmt: skip
+    deg = {c: np.nan_to_num(v) for c, v in deg.items()}
     fast = _fast(ctx, m, mask, seg_epoch, deg)
     for name, cond in fast.pop("flags"):
         flag(cond, name)
@@ -187,10 +211,14 @@ def run_sbas(
 
     # --- variances (DO-229D A.4.5, J.2.4) ---------------------------------------------------------
     s_udre = np.sqrt(fast["sigma2_udre"]) * dudre
-    eps = fast["eps_fc"] + fast["eps_rrc"] + ltc["eps_ltc"]
+    eps_fc = np.where(no_mt10, 0.0, fast["eps_fc"])
+    eps_rrc = np.where(no_mt10, 0.0, fast["eps_rrc"])
+    eps_er = _eps_er(ctx, fast, ltc, deg)
+    eps = eps_fc + eps_rrc + ltc["eps_ltc"] + eps_er
     rss = deg["rss_udre"] > 0
-    sig2_flt = np.where(rss, s_udre**2 + fast["eps_fc"] ** 2 + fast["eps_rrc"] ** 2 + ltc["eps_ltc"] ** 2,
+    sig2_flt = np.where(rss, s_udre**2 + eps_fc**2 + eps_rrc**2 + ltc["eps_ltc"] ** 2 + eps_er**2,
                         (s_udre + eps) ** 2)  # fmt: skip
+    sig2_flt = np.where(no_mt10, (s_udre + SIGMA_FLT_NO_MT10) ** 2, sig2_flt)  # A.4.5.1, NPA only
     elev_deg = np.rad2deg(geom["elev"])
     s_noise = 0.36 if opt.aad == "A" else 0.15
     s_mp = 0.13 + 0.53 * np.exp(-elev_deg / 10.0)
@@ -201,7 +229,7 @@ def run_sbas(
     model = geom["rho"] - C * geom["clock"] + C * geom["tgd"] + grid["slant"] + tropo
     prefit = pr + fast["prc"] + fast["rrc_corr"] - model
     used = reason == 0
-    k_h = K_H_PA if opt.mode == "PA" else K_H_NPA
+    k_h = K_H_PA if pa else K_H_NPA
     sol = weighted_least_squares(epoch, epochs_us.size, geom["elev"], geom["azim"], prefit, sig2, used,
                                  k_h=k_h, k_v=K_V_PA)  # fmt: skip
     too_few = used & (sol.nsv[epoch] == 0)
@@ -237,10 +265,10 @@ def run_sbas(
             "sigma_udre": np.sqrt(fast["sigma2_udre"]),
             "delta_udre": dudre,
             "ai": fast["ai"],
-            "eps_fc": fast["eps_fc"],
-            "eps_rrc": fast["eps_rrc"],
+            "eps_fc": eps_fc,
+            "eps_rrc": eps_rrc,
             "eps_ltc": ltc["eps_ltc"],
-            "eps_er": np.zeros(t.size),
+            "eps_er": eps_er,
             "sigma_flt": np.sqrt(sig2_flt),
             "iode": ltc["iode"],
             "previous_iode": ltc["previous_iode"],
@@ -296,6 +324,12 @@ def _take(values: np.ndarray, rows: np.ndarray, fill: float = np.nan) -> np.ndar
     if out.dtype.kind in "iub":  # signed 64-bit (or float) so that differences and fills do not wrap
         out = out.astype(float if isinstance(fill, float) else np.int64)
     return np.where(rows >= 0, out, fill)
+
+
+def _ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a / b, 0 where b is 0 (an MT 10 interval that is absent: its degradation term is 0)."""
+    a, b = np.broadcast_arrays(np.asarray(a, float), np.asarray(b, float))
+    return np.divide(a, b, out=np.zeros(a.shape), where=b != 0)
 
 
 def _select_geo(msgs: SbasMessages, geo: int | None) -> SbasMessages:
@@ -431,7 +465,17 @@ def _fast(ctx: _Context, m: SbasMessages, mask: _Mask, seg_epoch: np.ndarray, de
     return {
         "prc": np.where(no_fc, np.nan, prc), "rrc": rrc, "rrc_corr": rrc * t_of, "udrei": udrei,
         "sigma2_udre": sigma2_udre, "ai": ai, "eps_fc": eps_fc, "eps_rrc": eps_rrc, "flags": flags,
+        "pa_timed_out": ctx.age(t_u) > np.asarray(FC_TIMEOUT_PA, float)[ai_index],
     }  # fmt: skip
+
+
+def _eps_er(ctx: _Context, fast: dict, ltc: dict, deg: dict) -> np.ndarray:
+    """En-route degradation eps_er (DO-229D A.4.5.1.4): C_er (MT 10) in NPA once the fast or the
+    long-term correction has outlived its PA/APV time-out (Table A-8, A-25) but not its NPA one; 0 in PA,
+    where such a satellite is not used."""
+    if ctx.opt.mode == "PA":
+        return np.zeros(ctx.t.size)
+    return np.where(fast["pa_timed_out"] | ltc["pa_timed_out"], deg["cer"], 0.0)
 
 
 def _smallest_timeout(
@@ -503,11 +547,12 @@ def _long_term(ctx: _Context, m: SbasMessages, mask: _Mask, deg: dict, eph: pl.D
     t0 = _take(times_us(lt["t0"].fill_null(lt["time"])), r, fill=0)
     dt0 = np.where(get["velocity_code"] == 1, (ctx.t - t0) / US, 0.0)
     age_tx = (ctx.t - _take(tl, r, fill=0)) / US + 1.0  # t - t_ltc, t_ltc = tag - 1 s
-    v0 = deg["cltc_v0"] * np.floor(age_tx / deg["iltc_v0"])
+    v0 = deg["cltc_v0"] * np.floor(_ratio(age_tx, deg["iltc_v0"]))
     outside = np.maximum(0.0, np.maximum(-dt0, dt0 - deg["iltc_v1"]))
     v1 = np.where(outside > 0, deg["cltc_lsb"] + deg["cltc_v1"] * outside, 0.0)
     flags = [("no_long_term", r < 0), ("long_term_timeout", timed_out)]
     return {
+        "pa_timed_out": (r >= 0) & (ctx.age(_take(tl, r, fill=0)) > TIMEOUT_PA[25]),
         "iode": _take(iode_tab, r, fill=-1).astype(np.int64),
         "eph_row": np.where(use_prev, row_prev, row_cur),
         "previous_iode": use_prev,
@@ -629,7 +674,7 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
     s2give = np.nan_to_num(_take(g["sigma2_give"].to_numpy(), r))
     t_iono = (tq + flight_us - _take(tg, r, fill=0)) / US + 1.0  # t - (tag - 1)
     d = {k2: deg[k2][idx][:, None] for k2 in ("ciono_step", "iiono", "ciono_ramp", "rss_iono")}
-    eps = d["ciono_step"] * np.floor(t_iono / d["iiono"]) + d["ciono_ramp"] * t_iono
+    eps = d["ciono_step"] * np.floor(_ratio(t_iono, d["iiono"])) + d["ciono_ramp"] * t_iono
     s2grid = np.where(d["rss_iono"] > 0, s2give + eps**2, (np.sqrt(s2give) + eps) ** 2)
     vert = (w * givd).sum(axis=1)
     s2uive = (w * s2grid).sum(axis=1)

@@ -16,6 +16,8 @@ Run from the repository root::
    ``glab_synt_1930-2210.out.gz`` and ``glab_synb_1930-2210.out.gz``. The window holds PRN 26's
    ionospheric triangle rejections at Toulouse (19:46-19:54) and the IODE change-over of 22:03
    for which the daily navigation file has no new ephemerides.
+5. ``glab_synt_1930-2210_npa.out.gz``: gLAB's processing of the evening Toulouse window in NPA mode
+   (``-model:sbasmode NPA``, otherwise the same options).
 All gzip files are written without name or time stamp, so they do not depend on the run.
 """
 
@@ -51,7 +53,7 @@ def cut_obs(text: str, first: str = " 19  1 14  2  0  0", last: str = " 19  1 14
     return text[:end] + text[start:stop]
 
 
-def run_glab(glab: str, obs_name: str, obs: str, ems: bytes) -> bytes:
+def run_glab(glab: str, obs_name: str, obs: str, ems: bytes, mode: str = "PA") -> bytes:
     """gLAB's output for ``obs`` with ``ems`` and the day's navigation file, the KEEP lines only."""
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
@@ -59,7 +61,8 @@ def run_glab(glab: str, obs_name: str, obs: str, ems: bytes) -> bytes:
         (work / "egnos123.ems").write_bytes(ems)
         (work / "brdc0140.19n").write_bytes((DATA / "brdc0140.19n").read_bytes())
         inputs = ["-input:obs", obs_name, "-input:nav", "brdc0140.19n", "-input:sbas1f", "egnos123.ems"]
-        cmd = [glab, *inputs, *GLAB_OPTIONS, "-output:file", "full.out"]
+        options = [mode if o == "PA" else o for o in GLAB_OPTIONS]
+        cmd = [glab, *inputs, *options, "-output:file", "full.out"]
         subprocess.run(cmd, cwd=work, check=True, stdout=subprocess.DEVNULL)
         lines = (work / "full.out").read_text().splitlines(keepends=True)
     kept = [ln for ln in lines if ln.split(None, 1)[0].rstrip("*") in KEEP and "built on" not in ln]
@@ -82,6 +85,9 @@ def evening(glab: str) -> None:
         write_gz(OUT / f"{station}0140_1930-2210.19o.gz", obs.encode())
         out = run_glab(glab, f"{station}0140.19o", obs, ems)
         write_gz(OUT / f"glab_{station.lower()}_1930-2210.out.gz", out)
+        if station == "SYNT":
+            out = run_glab(glab, f"{station}0140.19o", obs, ems, mode="NPA")
+            write_gz(OUT / "glab_synt_1930-2210_npa.out.gz", out)
 
 
 def main(glab: str) -> None:
