@@ -769,6 +769,151 @@ def _write_index(out_dir: Path, reports: list[tuple[str, Path]]) -> Path:
     return path
 
 
+class _ManyOption(click.Option):
+    """A repeatable option that also takes several values after one flag: ``--obs a.19o b.19o``.
+
+    Values are taken up to the next token that starts with ``-``.
+    """
+
+    def add_to_parser(self, parser, ctx: click.Context) -> None:
+        super().add_to_parser(parser, ctx)
+        for name in self.opts:
+            opt = parser._long_opt.get(name) or parser._short_opt.get(name)
+            if opt is None:  # pragma: no cover - click always registers the option's names
+                continue
+            take = opt.process
+
+            def process(value, state, take=take) -> None:
+                take(value, state)
+                while state.rargs and not state.rargs[0].startswith("-"):
+                    take(state.rargs.pop(0), state)
+
+            opt.process = process
+
+
+def _sbas_reference(lla: str | None, ecef: str | None):
+    """--reference LAT,LON,H | mean, or --reference-ecef X,Y,Z; None for the RINEX header position."""
+    if lla is not None and lla.strip().lower() == "mean":
+        if ecef:
+            raise click.UsageError("give --reference or --reference-ecef, not both")
+        return "mean"
+    return _reference(lla, ecef)
+
+
+_FILES = click.Path(dir_okay=False, path_type=Path)
+
+
+@main.command()
+@click.option(
+    "--obs",
+    "obs",
+    cls=_ManyOption,
+    multiple=True,
+    required=True,
+    type=_FILES,
+    metavar="FILE...",
+    help="Observations: RINEX 2/3 (plain, gzip, Hatanaka) or a u-blox UBX raw log (RXM-RAW/RAWX).",
+)
+@click.option(
+    "--nav",
+    "nav",
+    cls=_ManyOption,
+    multiple=True,
+    type=_FILES,
+    metavar="FILE...",
+    help="GPS broadcast ephemerides (RINEX 2/3 navigation; default: those of a UBX log in --obs).",
+)
+@click.option(
+    "--sbas",
+    "sbas_files",
+    cls=_ManyOption,
+    multiple=True,
+    type=_FILES,
+    metavar="FILE...",
+    help="SBAS messages: EMS files (default: the SBAS frames of a UBX log in --obs).",
+)
+@click.option(
+    "--reference",
+    "reference",
+    metavar="LAT,LON,H|mean",
+    help="True antenna position (deg, deg, ellipsoidal m), or 'mean': the mean of the SBAS "
+    "solutions (default: the RINEX header position).",
+)
+@click.option("--reference-ecef", "reference_ecef", metavar="X,Y,Z", help="True antenna position, ECEF (m).")
+@click.option(
+    "--mode",
+    type=click.Choice(["PA", "NPA"]),
+    default="PA",
+    show_default=True,
+    help="Protection-level factors and message time-outs.",
+)
+@click.option(
+    "--mask",
+    "mask_deg",
+    default=5.0,
+    show_default=True,
+    type=click.FloatRange(0, 90),
+    help="Elevation mask (deg).",
+)
+@click.option(
+    "--geo",
+    type=click.IntRange(120, 158),
+    default=None,
+    help="GEO PRN whose messages are used (default: the one received at each epoch).",
+)
+@click.option("--station", help="Station name (default: RINEX marker name or file name).")
+@click.option(
+    "-o",
+    "--output",
+    "out",
+    required=True,
+    type=_FILES,
+    help="Epoch table (.parquet or .csv); the per-satellite table goes next to it (NAME.sats.parquet).",
+)
+def sbas(obs, nav, sbas_files, reference, reference_ecef, mode, mask_deg, geo, station, out) -> None:
+    """DO-229 SBAS engine: errors and protection levels from raw observations and SBAS messages."""
+    from overbound.sbas.engine import SbasOptions
+    from overbound.sbas.run import process, write_run
+
+    ref = _sbas_reference(reference, reference_ecef)
+    options = SbasOptions(mode=mode, mask_deg=mask_deg, geo=geo)
+    with _progress() as bar:
+        task = bar.add_task("reading", total=None)
+        run = process(list(obs), list(nav), list(sbas_files), reference=ref, station=station, options=options,
+                      progress=lambda what: bar.update(task, description=what))  # fmt: skip
+        bar.update(task, description=f"writing {out}")
+        epochs_path, sats_path = write_run(run, out)
+    console.print(_sbas_line(run, epochs_path), highlight=False, soft_wrap=True)
+    click.echo(f"epochs: {epochs_path}")
+    click.echo(f"satellites: {sats_path}")
+
+
+def _sbas_line(run, path: Path) -> str:
+    """One line: epochs and solutions, PL medians, error percentiles, rejections and missing data."""
+    import numpy as np
+
+    e = run.epochs
+    sol = e.filter(e["vpl"].is_finite())
+    c = run.counts
+    msgs = c["messages"]
+
+    def pct(x, q) -> str:
+        return _fmt(float(np.percentile(np.abs(x), q))) if len(x) else "n/a"
+
+    rejected = ", ".join(f"{k} {v}" for k, v in c["rejected"].items()) or "none"
+    miss = c["missing_ephemeris_rows"]
+    prns = c["missing_ephemeris_prns"]
+    geos = ", ".join(str(g) for g in sorted(set(e["geo"].to_list())))
+    return (
+        f"{path}: {e.height} epochs, {sol.height} with a {run.options.mode} solution (GEO {geos}); "
+        f"HPL/VPL median {pct(sol['hpl'], 50)}/{pct(sol['vpl'], 50)} m; "
+        f"HPE95 {pct(sol['hpe'], 95)} m, |VPE|95 {pct(sol['vpe'], 95)} m "
+        f"(reference: {run.reference_source}); messages {msgs['messages']}, bad CRC {c['bad_crc']}; "
+        f"rejected lines/records: {rejected}; observations without ephemeris: {miss}"
+        + (f" (PRN {', '.join(map(str, prns))})" if prns else "")
+    )
+
+
 @main.command()
 def schema() -> None:
     """Print the epoch table's columns (Markdown)."""

@@ -1,0 +1,463 @@
+"""u-blox raw logs for the SBAS engine: observations, GPS ephemerides and SBAS frames from one UBX log.
+
+A u-blox receiver with raw output logs, in one stream, what a DO-229 user engine needs:
+
+* pseudoranges: UBX-RXM-RAW (u-blox 5/6: ``iTOW``, ``week``, per satellite ``prMes``, ``cpMes``,
+  ``doMes``, ``sv``, ``mesQI``, ``cno``, ``lli``) or UBX-RXM-RAWX (u-blox 8 and later:
+  ``rcvTow``, ``week``, per signal ``prMes``, ``cpMes``, ``doMes``, ``gnssId``, ``svId``,
+  ``sigId``, ``cno``, ``trkStat``);
+* GPS ephemerides: UBX-AID-EPH (subframes 1-3, words 3-10, parity removed, 24 data bits in the
+  low bits of each uint32), UBX-RXM-SFRB (u-blox 5/6: ten words of 24 data bits for GPS) or
+  UBX-RXM-SFRBX (ten 30-bit words with parity; data = bits 29-6);
+* SBAS messages: UBX-RXM-SFRB for SV >= 120 (words 0-6 hold message bits 0-223 MSB first, bits
+  25-0 of word 7 hold bits 224-249, RTKLIB ``sbsdecodemsg`` layout) or UBX-RXM-SFRBX with
+  ``gnssId`` 1 (eight big-endian words, bits MSB first, RTKLIB ``decode_snav`` layout).
+
+Frames are decoded by :mod:`pyubx2` (``UBXReader.parse``, which checks the checksum); this module
+finds them, counts what cannot be read and turns the messages into the tables the engine takes:
+the RINEX observation table of :mod:`overbound.io.rinex_obs` (``time``, ``sat``, ``system``,
+``prn``, ``flag``, ``C1C``, ``L1C``, ``D1C``, ``S1C``), the ephemeris table of
+:mod:`overbound.io.rinex_nav` and :class:`~overbound.sbas.frames.SbasFrames`.
+
+Input
+-----
+Binary UBX (plain or gzip), or the *hex-wrapped* text form of the EGNOS SDK demo log: tokens
+separated by commas (or line ends), each either one complete UBX frame written as hex (``b562...``)
+or a marker word (``ComputeP``) that is skipped and counted.
+
+Time
+----
+RXM-RAW / RAWX epochs are GPS time (``week`` and time of week), the receiver's measurement time.
+RXM-SFRB(X) carry no time tag. An SBAS message follows in the log the raw epoch T during or after
+which it was received; its transmission started at the first GPS second t >= T - 1 (and after the
+previous message of the same GEO) whose phase modulo 3 fits its preamble (0x53, 0x9A, 0xC6 start at
+3k, 3k + 1, 3k + 2 s: DO-229D A.4.3, the 0x53 message at multiples of 3 s), and its tag is t + 1 s,
+the end of the one-second slot, as in EMS files (:mod:`overbound.io.ems`), so the engine treats
+both alike. A message without a preceding raw epoch cannot be dated and is counted
+(``sbas_undated``). An ephemeris's transmission time (``ttx``) is the raw epoch before the message
+that first carried it.
+
+Ephemeris fields follow IS-GPS-200 20.3.3.3 (subframe 1) and 20.3.3.4 (subframes 2, 3), Table
+20-I and 20-III for the scale factors; semicircles are turned into radians with the GPS value of
+pi. The 10-bit week of subframe 1 is resolved with the raw epochs' week.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections import Counter
+from dataclasses import dataclass, field
+
+import numpy as np
+import polars as pl
+from pyubx2 import UBXReader
+from pyubx2.exceptions import UBXMessageError, UBXParseError, UBXTypeError
+
+from overbound.io._rinex import GPS_EPOCH_US, US
+from overbound.io.open import Source, open_binary, source_name
+from overbound.io.schema import InputError, ReadReport
+from overbound.sbas.bits import FRAME_BYTES
+from overbound.sbas.crc import crc_ok
+from overbound.sbas.frames import REJECTED_SCHEMA, SbasFrames, empty_frames
+
+__all__ = ["UbxRaw", "is_ubx", "read_ubx_raw"]
+
+_SYNC = b"\xb5\x62"
+_WEEK_US = 604_800 * US
+_GPS_PI = 3.1415926535898  # IS-GPS-200 20.3.3.4.3.1
+_PHASE = {0x53: 0, 0x9A: 1, 0xC6: 2}  # transmission start modulo 3 s of each preamble
+_OBS_COLUMNS = ("C1C", "L1C", "D1C", "S1C")
+#: URA index -> URA (m), IS-GPS-200 20.3.3.3.1.3 (upper bounds; index 15: no accuracy prediction).
+_URA = (2.4, 3.4, 4.85, 6.85, 9.65, 13.65, 24.0, 48.0, 96.0, 192.0, 384.0, 768.0, 1536.0, 3072.0, 6144.0,
+        np.nan)  # fmt: skip
+_MARKERS = (b"computep",)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class UbxRaw:
+    """What one u-blox log holds for the SBAS engine.
+
+    Attributes
+    ----------
+    obs : observation table (RINEX table layout): one row per (epoch, satellite) with a pseudorange.
+    eph : GPS ephemerides (:attr:`overbound.io.rinex_nav.GpsEphemerides.table` layout), one row per
+        distinct (PRN, toc, IODE, IODC), first reception kept.
+    frames : SBAS messages with reconstructed EMS-style time tags.
+    counts : frames by UBX message name, skipped markers, and rejections by reason.
+    file : the log's name.
+    """
+
+    obs: pl.DataFrame
+    eph: pl.DataFrame
+    frames: SbasFrames
+    counts: dict[str, object] = field(default_factory=dict)
+    file: str = ""
+
+
+def is_ubx(head: bytes) -> bool:
+    """True for a binary UBX log or its hex-wrapped text form (first bytes after decompression)."""
+    h = head.lstrip()
+    return h.startswith(_SYNC) or h[:4].lower() == b"b562"
+
+
+def read_ubx_raw(source: Source) -> tuple[UbxRaw, ReadReport]:
+    """Read a u-blox raw log (binary or hex-wrapped text, plain or gzip).
+
+    Returns
+    -------
+    raw : :class:`UbxRaw`.
+    report : ``rows_read`` UBX frames seen, ``rows_kept`` observation rows, ``rejected`` by reason
+        (``bad_frame`` checksum or length, ``bad_hex`` unreadable token, ``truncated_frame``,
+        ``sbas_undated``, ``incomplete_ephemeris``), ``invalidated`` (``bad_crc`` SBAS messages).
+
+    Raises
+    ------
+    InputError
+        The file is missing, is not a UBX log, or holds no raw measurement (RXM-RAW/RAWX).
+    """
+    name = source_name(source)
+    stream = open_binary(source)
+    try:
+        data = stream.read()
+    finally:
+        if not hasattr(source, "read"):
+            stream.close()
+    if not is_ubx(data[:64]):
+        raise InputError(name, "not a u-blox UBX log (no 0xB5 0x62 sync, nor hex-wrapped 'b562...' frames)")
+    rejected: Counter = Counter()
+    counts: Counter = Counter()
+    if not data.lstrip().startswith(_SYNC):
+        data = _unwrap_hex(data, rejected, counts)
+    state = _State()
+    for offset, msg in _frames(data, rejected):
+        counts[msg.identity] += 1
+        state.take(msg, offset)
+    if not state.obs:
+        raise InputError(name, "no raw measurements (UBX-RXM-RAW or RXM-RAWX) in the log")
+    obs = state.obs_table()
+    eph = state.eph_table(name, rejected)
+    frames = state.sbas_frames(name, rejected)
+    counts["markers_skipped"] = counts.pop("markers", 0)
+    raw = UbxRaw(obs=obs, eph=eph, frames=frames, counts=dict(sorted(counts.items())), file=name)
+    bad_crc = int((~frames.crc_ok).sum())
+    return raw, ReadReport(
+        source=name,
+        format="ubx-raw",
+        rows_read=int(sum(v for k, v in counts.items() if k != "markers_skipped")) + sum(rejected.values()),
+        rows_kept=obs.height,
+        rejected=dict(sorted(rejected.items())),
+        invalidated={"bad_crc": bad_crc} if bad_crc else {},
+        notes=(
+            f"frames: {dict(sorted((k, v) for k, v in counts.items() if k != 'markers_skipped'))}",
+            f"epochs: {obs['time'].n_unique()}, GPS ephemerides: {eph.height}, SBAS messages: {len(frames)} "
+            f"(GEOs {sorted(set(frames.prn.tolist()))})",
+        ),
+    )
+
+
+# --------------------------------------------------------------------------- frames
+
+
+def _unwrap_hex(text: bytes, rejected: Counter, counts: Counter) -> bytes:
+    """Binary stream of the hex-wrapped log: tokens split at commas and line ends."""
+    out = []
+    for tok in text.replace(b"\r", b",").replace(b"\n", b",").split(b","):
+        tok = tok.strip()
+        if not tok:
+            continue
+        if tok.lower() in _MARKERS:
+            counts["markers"] += 1
+            continue
+        try:
+            out.append(bytes.fromhex(tok.decode("ascii")))
+        except (ValueError, UnicodeDecodeError):
+            rejected["bad_hex"] += 1
+    return b"".join(out)
+
+
+def _frames(data: bytes, rejected: Counter):
+    """(offset, parsed message) of every readable frame; bad ones counted, the scan resynchronises."""
+    i = 0
+    n = len(data)
+    while (j := data.find(_SYNC, i)) >= 0:
+        if j + 8 > n:
+            rejected["truncated_frame"] += 1
+            return
+        length = struct.unpack_from("<H", data, j + 4)[0]
+        if j + 8 + length > n:
+            rejected["truncated_frame"] += 1
+            return
+        try:
+            msg = UBXReader.parse(data[j : j + 8 + length])
+        except (UBXParseError, UBXMessageError, UBXTypeError, ValueError, struct.error):
+            rejected["bad_frame"] += 1
+            i = j + 2
+            continue
+        yield j, msg
+        i = j + 8 + length
+
+
+# --------------------------------------------------------------------------- state
+
+
+@dataclass(slots=True)
+class _State:
+    """Messages gathered in log order."""
+
+    obs: list = field(default_factory=list)  # (time_us, system, prn, pr, cp, dop, cno)
+    week: int = -1
+    last_time: int | None = None  # raw epoch before the current frame, us
+    last_tow_s: int | None = None
+    sbas: list = field(default_factory=list)  # (tow_s of the preceding epoch or None, week, prn, bytes)
+    gps_sub: dict = field(default_factory=dict)  # prn -> {subframe id: words}
+    eph: list = field(default_factory=list)  # (prn, words of subframes 1-3 (3 x 10), time_us)
+
+    def take(self, msg, offset: int) -> None:
+        ident = msg.identity
+        if ident == "RXM-RAW":
+            self._raw(msg)
+        elif ident == "RXM-RAWX":
+            self._rawx(msg)
+        elif ident == "RXM-SFRB":
+            self._sfrb(msg)
+        elif ident == "RXM-SFRBX":
+            self._sfrbx(msg)
+        elif ident == "AID-EPH":
+            self._aid_eph(msg)
+
+    def _epoch(self, week: int, tow_s: float) -> int:
+        self.week = week
+        t = GPS_EPOCH_US + week * _WEEK_US + round(tow_s * US)
+        self.last_time, self.last_tow_s = t, int(np.floor(tow_s))
+        return t
+
+    def _raw(self, m) -> None:
+        t = self._epoch(m.week, m.iTOW / 1000.0)
+        for k in range(1, m.numSV + 1):
+            sv = getattr(m, f"sv_{k:02d}")
+            qi = getattr(m, f"mesQI_{k:02d}")
+            pr = getattr(m, f"prMes_{k:02d}") if qi >= 4 else np.nan  # u-blox 6: mesQI >= 4, PR+DO OK
+            cp = getattr(m, f"cpMes_{k:02d}") if qi >= 5 else np.nan
+            system = "S" if sv >= 120 else "G"
+            self.obs.append((t, system, sv, pr, cp, getattr(m, f"doMes_{k:02d}"), getattr(m, f"cno_{k:02d}")))
+
+    def _rawx(self, m) -> None:
+        t = self._epoch(m.week, m.rcvTow)
+        for k in range(1, m.numMeas + 1):
+            gnss, sig = getattr(m, f"gnssId_{k:02d}"), getattr(m, f"sigId_{k:02d}")
+            if gnss not in (0, 1) or sig != 0:  # GPS / SBAS L1 C/A only
+                continue
+            ok = getattr(m, f"prValid_{k:02d}")
+            pr = getattr(m, f"prMes_{k:02d}") if ok else np.nan
+            cp = getattr(m, f"cpMes_{k:02d}") if getattr(m, f"cpValid_{k:02d}") else np.nan
+            self.obs.append((t, "G" if gnss == 0 else "S", getattr(m, f"svId_{k:02d}"), pr, cp,
+                             getattr(m, f"doMes_{k:02d}"), getattr(m, f"cno_{k:02d}")))  # fmt: skip
+
+    def _sfrb(self, m) -> None:
+        w = [int.from_bytes(getattr(m, f"dwrd_{k:02d}"), "little") for k in range(1, 11)]
+        if m.svid >= 120:
+            bits = 0
+            for k in range(7):
+                bits = (bits << 32) | w[k]
+            bits = ((bits << 26) | (w[7] & 0x3FFFFFF)) << 6
+            self.sbas.append((self.last_tow_s, self.week, m.svid, bits.to_bytes(FRAME_BYTES, "big")))
+        elif 1 <= m.svid <= 32:
+            self._gps_subframe(m.svid, [x & 0xFFFFFF for x in w])
+
+    def _sfrbx(self, m) -> None:
+        w = [getattr(m, f"dwrd_{k:02d}") for k in range(1, m.numWords + 1)]
+        if m.gnssId == 1 and len(w) >= 8:
+            msg = b"".join(x.to_bytes(4, "big") for x in w[:8])
+            self.sbas.append((self.last_tow_s, self.week, m.svId, msg[:31] + bytes([msg[31] & 0xC0])))
+        elif m.gnssId == 0 and len(w) == 10:
+            self._gps_subframe(m.svId, [(x >> 6) & 0xFFFFFF for x in w])
+
+    def _gps_subframe(self, prn: int, words: list[int]) -> None:
+        sid = (words[1] >> 2) & 7
+        if sid not in (1, 2, 3):
+            return
+        sub = self.gps_sub.setdefault(prn, {})
+        sub[sid] = words
+        if len(sub) == 3 and _iode_match(sub[1], sub[2], sub[3]):
+            self.eph.append((prn, (sub[1], sub[2], sub[3]), self.last_time))
+            self.gps_sub[prn] = {}
+
+    def _aid_eph(self, m) -> None:
+        if not hasattr(m, "sf1d1_01"):  # 8-byte payload: no ephemeris for this SV
+            return
+        sf = []
+        for s in (1, 2, 3):
+            sf.append([0, 0] + [getattr(m, f"sf{s}d{k}_01") & 0xFFFFFF for k in range(1, 9)])
+        if _iode_match(*sf):
+            self.eph.append((int(m.svid), tuple(sf), self.last_time))
+
+    # ------------------------------------------------------------------ tables
+    def obs_table(self) -> pl.DataFrame:
+        t, system, prn, pr, cp, dop, cno = zip(*self.obs, strict=True)
+        df = pl.DataFrame(
+            {
+                "time": pl.Series(np.asarray(t, np.int64)).cast(pl.Datetime("us")),
+                "system": pl.Series(system, dtype=pl.String),
+                "prn": pl.Series(np.asarray(prn, np.int16)),
+                "C1C": np.asarray(pr, float),
+                "L1C": np.asarray(cp, float),
+                "D1C": np.asarray(dop, float),
+                "S1C": np.asarray(cno, float),
+            }
+        )
+        df = df.with_columns(
+            sat=pl.col("system") + pl.col("prn").cast(pl.String).str.zfill(2), flag=pl.lit(0, pl.UInt8)
+        )
+        df = df.unique(("time", "system", "prn"), keep="first", maintain_order=True)
+        return df.select("time", "sat", "system", "prn", "flag", *_OBS_COLUMNS).sort("time", "system", "prn")
+
+    def eph_table(self, name: str, rejected: Counter) -> pl.DataFrame:
+        rows = []
+        for k, (prn, sf, t) in enumerate(self.eph):
+            if t is None:
+                rejected["ephemeris_undated"] += 1
+                continue
+            rows.append({"prn": prn, **_decode_ephemeris(*sf, week_hint=_week_of(t)), "_t": t, "line": k + 1})
+        if not rows:
+            return _empty_eph()
+        df = pl.DataFrame(rows).sort("prn", "_t", maintain_order=True)
+        ttx = df["_t"].to_numpy()
+        # toe / toc across a week start from the transmission: the nearest week
+        shift = {
+            c: np.round((df[c].to_numpy() - ttx) / _WEEK_US).astype(np.int64) for c in ("toe_us", "toc_us")
+        }
+        df = df.with_columns(
+            toe_us=pl.Series(df["toe_us"].to_numpy() - shift["toe_us"] * _WEEK_US),
+            toc_us=pl.Series(df["toc_us"].to_numpy() - shift["toc_us"] * _WEEK_US),
+            week=pl.Series(df["week"].to_numpy() - shift["toe_us"]),
+        )
+        df = df.unique(("prn", "toc_us", "iode", "iodc"), keep="first", maintain_order=True)
+        ttx = df["_t"].to_numpy()
+        week_start = GPS_EPOCH_US + df["week"].to_numpy() * _WEEK_US
+        return df.with_columns(
+            sat=pl.format("G{}", pl.col("prn").cast(pl.String).str.zfill(2)),
+            prn=pl.col("prn").cast(pl.Int16),
+            toc=pl.col("toc_us").cast(pl.Datetime("us")),
+            ttx=pl.Series((ttx - week_start) / US),
+            toe_time=pl.col("toe_us").cast(pl.Datetime("us")),
+            ttx_time=pl.Series(ttx).cast(pl.Datetime("us")),
+            file=pl.lit(name),
+            line=pl.col("line").cast(pl.Int64),
+            **{c: pl.col(c).cast(pl.Int32) for c in _INT_COLUMNS},
+        ).select(_EPH_COLUMNS)
+
+    def sbas_frames(self, name: str, rejected: Counter) -> SbasFrames:
+        last: dict[int, int] = {}
+        keep = []
+        for k, (tow, week, prn, msg) in enumerate(self.sbas):
+            if tow is None:
+                rejected["sbas_undated"] += 1
+                continue
+            t = max(tow - 1, last.get(prn, -(10**9)) + 1)
+            while t % 3 != _PHASE.get(msg[0], t % 3):
+                t += 1
+            last[prn] = t
+            keep.append((GPS_EPOCH_US + week * _WEEK_US + (t + 1) * US, prn, msg, k + 1))
+        if not keep:
+            return empty_frames((name,))
+        time, prn, msg, line = zip(*keep, strict=True)
+        data = np.frombuffer(b"".join(msg), np.uint8).reshape(-1, FRAME_BYTES).copy()
+        order = np.argsort(np.asarray(time), kind="stable")
+        return SbasFrames(
+            time=np.asarray(time, np.int64)[order],
+            prn=np.asarray(prn, np.int16)[order],
+            data=data[order],
+            crc_ok=crc_ok(data)[order],
+            file=np.zeros(len(time), np.int16),
+            line=np.asarray(line, np.int64)[order],
+            files=(name,),
+            rejected=pl.DataFrame(schema=REJECTED_SCHEMA),
+        )
+
+
+def _week_of(t_us: int) -> int:
+    return int((t_us - GPS_EPOCH_US) // _WEEK_US)
+
+
+# --------------------------------------------------------------------------- ephemeris
+
+
+def _bits(words: list[int], word: int, first: int, length: int) -> int:
+    """Bits ``first .. first+length-1`` (1-based, MSB first) of 24-bit data word ``word`` (1-based)."""
+    return (words[word - 1] >> (24 - first - length + 1)) & ((1 << length) - 1)
+
+
+def _join(words: list[int], hi: tuple[int, int, int], lo: tuple[int, int, int]) -> int:
+    """A field split over two words: its MSBs at ``hi`` and LSBs at ``lo`` (word, first bit, length)."""
+    return (_bits(words, *hi) << lo[2]) | _bits(words, *lo)
+
+
+def _signed(v: int, n: int) -> int:
+    return v - (1 << n) if v >> (n - 1) else v
+
+
+def _iode_match(sf1: list[int], sf2: list[int], sf3: list[int]) -> bool:
+    """Subframes of one data set: IODE of 2 and 3 and the 8 LSBs of IODC agree (IS-GPS-200 20.3.4.4)."""
+    return _bits(sf2, 3, 1, 8) == _bits(sf3, 10, 1, 8) == _bits(sf1, 8, 1, 8)
+
+
+def _decode_ephemeris(sf1: list[int], sf2: list[int], sf3: list[int], *, week_hint: int) -> dict:
+    """IS-GPS-200 20.3.3.3 / 20.3.3.4 fields of subframes 1-3 (24-bit data words 1-10 each), SI units."""
+    wn = _bits(sf1, 3, 1, 10)
+    week = week_hint - ((week_hint - wn) % 1024)  # the full week with these 10 LSBs, not after the hint
+    if week_hint - week > 512:
+        week += 1024
+    toc = _bits(sf1, 8, 9, 16) * 16.0
+    toe = _bits(sf2, 10, 1, 16) * 16.0
+    pi = _GPS_PI
+    out = {
+        "af0": _signed(_bits(sf1, 10, 1, 22), 22) * 2.0**-31,
+        "af1": _signed(_bits(sf1, 9, 9, 16), 16) * 2.0**-43,
+        "af2": _signed(_bits(sf1, 9, 1, 8), 8) * 2.0**-55,
+        "iode": _bits(sf2, 3, 1, 8),
+        "crs": _signed(_bits(sf2, 3, 9, 16), 16) * 2.0**-5,
+        "delta_n": _signed(_bits(sf2, 4, 1, 16), 16) * 2.0**-43 * pi,
+        "m0": _signed(_join(sf2, (4, 17, 8), (5, 1, 24)), 32) * 2.0**-31 * pi,
+        "cuc": _signed(_bits(sf2, 6, 1, 16), 16) * 2.0**-29,
+        "e": _join(sf2, (6, 17, 8), (7, 1, 24)) * 2.0**-33,
+        "cus": _signed(_bits(sf2, 8, 1, 16), 16) * 2.0**-29,
+        "sqrt_a": _join(sf2, (8, 17, 8), (9, 1, 24)) * 2.0**-19,
+        "toe": toe,
+        "cic": _signed(_bits(sf3, 3, 1, 16), 16) * 2.0**-29,
+        "omega0": _signed(_join(sf3, (3, 17, 8), (4, 1, 24)), 32) * 2.0**-31 * pi,
+        "cis": _signed(_bits(sf3, 5, 1, 16), 16) * 2.0**-29,
+        "i0": _signed(_join(sf3, (5, 17, 8), (6, 1, 24)), 32) * 2.0**-31 * pi,
+        "crc": _signed(_bits(sf3, 7, 1, 16), 16) * 2.0**-5,
+        "omega": _signed(_join(sf3, (7, 17, 8), (8, 1, 24)), 32) * 2.0**-31 * pi,
+        "omega_dot": _signed(_bits(sf3, 9, 1, 24), 24) * 2.0**-43 * pi,
+        "idot": _signed(_bits(sf3, 10, 9, 14), 14) * 2.0**-43 * pi,
+        "l2_codes": _bits(sf1, 3, 11, 2),
+        "week": week,
+        "l2p_flag": _bits(sf1, 4, 1, 1),
+        "sv_accuracy": _URA[_bits(sf1, 3, 13, 4)],
+        "health": _bits(sf1, 3, 17, 6),
+        "tgd": _signed(_bits(sf1, 7, 17, 8), 8) * 2.0**-31,
+        "iodc": _join(sf1, (3, 23, 2), (8, 1, 8)),
+        "fit_interval": 4.0 if _bits(sf2, 10, 17, 1) == 0 else 6.0,
+    }
+    # toc and toe are times of the week of WN; one more or less when they sit across the week start
+    t0 = GPS_EPOCH_US + week * _WEEK_US
+    out["toe_us"] = t0 + round(toe * US)
+    out["toc_us"] = t0 + round(toc * US)
+    return out
+
+
+_EPH_COLUMNS = (
+    "sat", "prn", "toc", "af0", "af1", "af2", "iode", "crs", "delta_n", "m0", "cuc", "e", "cus", "sqrt_a",
+    "toe", "cic", "omega0", "cis", "i0", "crc", "omega", "omega_dot", "idot", "l2_codes", "week", "l2p_flag",
+    "sv_accuracy", "health", "tgd", "iodc", "ttx", "fit_interval", "toe_time", "ttx_time", "file", "line",
+)  # fmt: skip
+_INT_COLUMNS = ("iode", "l2_codes", "week", "l2p_flag", "health", "iodc")
+
+
+def _empty_eph() -> pl.DataFrame:
+    schema = {c: pl.Float64 for c in _EPH_COLUMNS}
+    schema.update({c: pl.Int32 for c in _INT_COLUMNS})
+    schema.update({"sat": pl.String, "prn": pl.Int16, "toc": pl.Datetime("us"), "toe_time": pl.Datetime("us"),
+                   "ttx_time": pl.Datetime("us"), "file": pl.String, "line": pl.Int64})  # fmt: skip
+    return pl.DataFrame(schema=schema)

@@ -1,0 +1,530 @@
+"""Files in, epoch table out: the ``overbound sbas`` pipeline around :func:`~overbound.sbas.engine.run_sbas`.
+
+:func:`process` reads the observation, navigation and SBAS message files (each recognised by its
+content: RINEX 2/3 observations, plain, gzip or Hatanaka; RINEX 2/3 GPS navigation; EMS; u-blox
+UBX raw logs, binary or hex-wrapped, which may carry all three), checks that they fit together
+(ephemerides and messages over the observation span), chooses the reference position and the
+GEO, runs the engine and gathers every count of what was rejected on the way.
+:func:`write_run` writes the epoch table (:func:`overbound.io.table.write_epochs`, so ``overbound
+analyze`` reads it) and the per-satellite table next to it (``NAME.sats.parquet``).
+
+Reference position
+------------------
+The engine linearises about the reference and reports errors against it. It is, in order: the
+position given (geodetic or ECEF); the RINEX header ``APPROX POSITION XYZ``; or, with
+``reference="mean"``, the mean of the engine's own solutions: a first run about a plain
+single-frequency position (least squares on broadcast orbits and clocks, no atmosphere, median
+over up to 60 epochs) gives east/north/up offsets whose mean over the epochs with a solution
+moves the reference; the engine runs again about the moved point (twice, so the linearisation
+point is within millimetres of the mean). Errors are then scatter about the mean, the only
+choice when no surveyed position exists (the u-blox EGNOS hour).
+
+GEO
+---
+With messages of one GEO, that one. With several and no ``geo``, each epoch takes the GEO a
+single-channel SBAS receiver would be tracking: it stays with its GEO while that GEO's last
+CRC-valid message is at most :data:`GEO_SWITCH_S` old, and otherwise switches to the GEO with
+the most recent message. Each GEO's epochs go through the engine with that GEO's messages only
+(its start-up after a switch is the engine's: mask, fast corrections and grid must be received
+again). The ``geo`` column of both tables says which GEO served each epoch.
+"""
+
+from __future__ import annotations
+
+import io
+import re
+from collections import Counter
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import polars as pl
+import pymap3d
+
+from overbound.io._rinex import US, load_bytes
+from overbound.io.ems import read_ems
+from overbound.io.geodesy import Reference
+from overbound.io.open import Source, source_name
+from overbound.io.rinex_nav import (
+    SPEED_OF_LIGHT,
+    broadcast_state,
+    read_rinex_nav,
+    rotate_earth,
+    select_ephemeris,
+)
+from overbound.io.rinex_obs import read_rinex_obs
+from overbound.io.schema import InputError, ReadReport
+from overbound.io.table import write_epochs
+from overbound.io.ubx_raw import is_ubx, read_ubx_raw
+from overbound.sbas.engine import SbasOptions, SbasResult, run_sbas
+from overbound.sbas.frames import SbasFrames
+from overbound.sbas.messages import decode
+
+__all__ = ["GEO_SWITCH_S", "SbasInputs", "SbasRun", "process", "read_inputs", "satellites_path", "write_run"]
+
+#: A tracked GEO is left when its last message is older than this (s).
+GEO_SWITCH_S = 12.0
+_EMS_LINE = re.compile(rb"^\s*\d{3} \d\d \d\d \d\d \d\d \d\d \d\d [ \d]?\d [0-9A-Fa-f]{64}\s*$")
+_KINDS = {
+    "obs": ("rinex-obs", "ubx"),
+    "nav": ("rinex-nav", "ubx"),
+    "sbas": ("ems", "ubx"),
+}
+_KIND_TEXT = {
+    "rinex-obs": "a RINEX observation file",
+    "rinex-nav": "a RINEX navigation file",
+    "ems": "an EMS SBAS message file",
+    "ubx": "a u-blox UBX log",
+}
+_OPTION = {"obs": "--obs", "nav": "--nav", "sbas": "--sbas"}
+_ACCEPTS = {
+    "obs": "RINEX 2/3 observations (plain, gzip, Hatanaka) or a u-blox UBX raw log",
+    "nav": "RINEX 2/3 GPS navigation or a u-blox UBX raw log",
+    "sbas": "EMS SBAS message files or a u-blox UBX raw log",
+}
+Progress = Callable[[str], None]
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class SbasInputs:
+    """Everything read from the files, before the engine."""
+
+    obs: pl.DataFrame
+    eph: pl.DataFrame
+    frames: SbasFrames
+    header_position: tuple[float, float, float] | None
+    station: str
+    reports: tuple[tuple[str, ReadReport], ...]  # (role, report)
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class SbasRun:
+    """The engine's output for a set of files, with the reference used and every count."""
+
+    epochs: pl.DataFrame
+    satellites: pl.DataFrame
+    reference_ecef: tuple[float, float, float]
+    reference_source: str
+    station: str
+    options: SbasOptions
+    reports: tuple[tuple[str, ReadReport], ...]
+    counts: dict[str, object] = field(default_factory=dict)
+
+    def metadata(self) -> dict:
+        """JSON-ready provenance: inputs, rejections, options, reference, engine counts."""
+        lat, lon, h = (float(v) for v in pymap3d.ecef2geodetic(*self.reference_ecef))
+        return {
+            "sbas": {
+                "reference_ecef": [round(v, 4) for v in self.reference_ecef],
+                "reference_llh": [round(lat, 9), round(lon, 9), round(h, 4)],
+                "reference_source": self.reference_source,
+                "options": {
+                    "mode": self.options.mode,
+                    "mask_deg": self.options.mask_deg,
+                    "geo": self.options.geo,
+                    "flight_time": self.options.flight_time,
+                    "aad": self.options.aad,
+                },
+                "inputs": [{"role": role, **r.to_dict()} for role, r in self.reports],
+                "counts": self.counts,
+            }
+        }
+
+
+def process(
+    obs: Source | Sequence[Source],
+    nav: Source | Sequence[Source] = (),
+    sbas: Source | Sequence[Source] = (),
+    *,
+    reference: Reference | tuple[float, float, float] | str | None = None,
+    station: str | None = None,
+    options: SbasOptions | None = None,
+    progress: Progress | None = None,
+) -> SbasRun:
+    """Read the files and run the DO-229 engine on them.
+
+    Parameters
+    ----------
+    obs : observation files (RINEX 2/3, gzip, Hatanaka) or u-blox UBX raw logs.
+    nav : GPS navigation files; may be empty when a UBX log in ``obs`` carries ephemerides.
+    sbas : EMS files; may be empty when a UBX log in ``obs`` carries SBAS frames.
+    reference : a :class:`Reference`, an ECEF triple, ``"mean"`` (see the module notes) or None
+        (the RINEX header position).
+    station : name for the ``station`` column (default: the RINEX marker name or the file stem).
+    options : engine options (mode, mask, GEO...).
+    progress : called with a short description before each step.
+
+    Raises
+    ------
+    InputError
+        Unreadable or unknown files, no pseudoranges, no ephemeris covering the observations, no
+        SBAS message over them, no reference position.
+    """
+    step = progress or (lambda _: None)
+    opt = options or SbasOptions()
+    inp = read_inputs(obs, nav, sbas, station=station, progress=step)
+    counts = _check(inp)
+    msgs = decode(inp.frames)
+    counts["messages"] = msgs.counts
+    if isinstance(reference, str) and reference != "mean":
+        raise ValueError(f"reference {reference!r}: expected a position, 'mean' or None")
+    if reference is None:
+        if inp.header_position is None:
+            raise InputError(
+                inp.station, "no reference position: the observations have no RINEX header position; "
+                "give --reference LAT,LON,H, --reference-ecef X,Y,Z or --reference mean",
+            )  # fmt: skip
+        ref, source = inp.header_position, "rinex header"
+    elif isinstance(reference, Reference):
+        ref, source = reference.to_ecef(), "given"
+    elif isinstance(reference, str):
+        step("initial position")
+        ref, source = inp.header_position or _spp(inp.obs, inp.eph, inp.station), "mean"
+    else:
+        ref, source = tuple(float(v) for v in reference), "given"
+    geo_of_epoch = _geo_schedule(inp.obs, inp.frames, opt.geo)
+    passes = 3 if source == "mean" else 1
+    for k in range(passes):
+        step(f"SBAS engine (mean position, pass {k + 1} of {passes})" if passes > 1 else "SBAS engine")
+        result = _run(inp, msgs, ref, opt, geo_of_epoch)
+        if source == "mean" and k < passes - 1:
+            ref = _shift(ref, result.epochs)
+    counts["engine"] = result.counts
+    return SbasRun(
+        epochs=result.epochs, satellites=result.satellites, reference_ecef=tuple(float(v) for v in ref),
+        reference_source=source, station=inp.station, options=opt, reports=inp.reports, counts=counts,
+    )  # fmt: skip
+
+
+def read_inputs(
+    obs: Source | Sequence[Source],
+    nav: Source | Sequence[Source] = (),
+    sbas: Source | Sequence[Source] = (),
+    *,
+    station: str | None = None,
+    progress: Progress | None = None,
+) -> SbasInputs:
+    """Read and merge all input files (see :func:`process`)."""
+    step = progress or (lambda _: None)
+    reports: list[tuple[str, ReadReport]] = []
+    tables, ephs, frames = [], [], []
+    header_pos, marker = None, ""
+    step("reading observations")
+    for name, kind, data in _load(obs, "obs"):
+        if kind == "ubx":
+            raw, rep = read_ubx_raw(_stream(data, name))
+            tables.append(raw.obs)
+            if not nav:
+                ephs.append(raw.eph)
+            if not sbas:
+                frames.append(raw.frames)
+        else:
+            o, rep = read_rinex_obs(_stream(data, name), codes=("C1C", "L1C", "S1C"))
+            tables.append(o.table.select(c for c in o.table.columns if not c.endswith(("_lli", "_ssi"))))
+            header_pos = header_pos or o.header.approx_position
+            marker = marker or o.header.marker_name.strip()
+        reports.append(("obs", rep))
+    step("reading ephemerides")
+    rinex_nav = []
+    for name, kind, data in _load(nav, "nav"):
+        if kind == "ubx":
+            raw, rep = read_ubx_raw(_stream(data, name))
+            ephs.append(raw.eph)
+            reports.append(("nav", rep))
+        else:
+            rinex_nav.append(_stream(data, name))
+    if rinex_nav:
+        n, rep = read_rinex_nav(rinex_nav)
+        ephs.append(n.table)
+        reports.append(("nav", rep))
+    step("reading SBAS messages")
+    ems = []
+    for name, kind, data in _load(sbas, "sbas"):
+        if kind == "ubx":
+            raw, rep = read_ubx_raw(_stream(data, name))
+            frames.append(raw.frames)
+            reports.append(("sbas", rep))
+        else:
+            ems.append(_stream(data, name))
+    if ems:
+        f, rep = read_ems(ems)
+        frames.append(f)
+        reports.append(("sbas", rep))
+    obs_table = pl.concat(tables, how="diagonal_relaxed") if tables else pl.DataFrame()
+    if obs_table.height:
+        obs_table = obs_table.unique(("time", "sat"), keep="first", maintain_order=True).sort("time", "prn")
+    eph = pl.concat(ephs, how="diagonal_relaxed") if ephs else pl.DataFrame()
+    if eph.height:
+        eph = eph.unique(("prn", "toc", "iode", "iodc"), keep="first", maintain_order=True)
+    first = _names(obs)[0] if _names(obs) else "obs"
+    return SbasInputs(
+        obs=obs_table, eph=eph, frames=SbasFrames.concat(frames), header_position=header_pos,
+        station=station or marker or Path(first).name.split(".")[0], reports=tuple(reports),
+    )  # fmt: skip
+
+
+def satellites_path(path: str | Path) -> Path:
+    """The per-satellite table next to an epoch table: ``x.parquet`` -> ``x.sats.parquet``."""
+    path = Path(path)
+    return path.with_name(f"{path.stem}.sats{path.suffix}")
+
+
+def write_run(run: SbasRun, path: str | Path) -> tuple[Path, Path]:
+    """Write the epoch table (with the run's provenance) and the per-satellite table next to it."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    rows = sum(r.rows_read for role, r in run.reports if role == "obs")
+    report = ReadReport(
+        source=", ".join(r.source for _, r in run.reports),
+        format="sbas-engine",
+        rows_read=rows,
+        rows_kept=run.epochs.height,
+        rejected=run.counts.get("rejected", {}),
+        invalidated={"bad_crc": run.counts["bad_crc"]} if run.counts.get("bad_crc") else {},
+        notes=(f"reference ({run.reference_source}): {run.reference_ecef}",),
+    )
+    write_epochs(run.epochs, path, report=report, extra_metadata=run.metadata())
+    sats = satellites_path(path)
+    if path.suffix.lower() == ".csv":
+        run.satellites.write_csv(sats)
+    else:
+        run.satellites.write_parquet(sats, compression="zstd")
+    return path, sats
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def _names(sources: Source | Sequence[Source]) -> list[str]:
+    return [source_name(s) for s in _items(sources)]
+
+
+def _items(sources: Source | Sequence[Source]) -> list[Source]:
+    if isinstance(sources, Sequence) and not isinstance(sources, str | bytes):
+        return list(sources)
+    return [sources]  # type: ignore[list-item]
+
+
+def _stream(data: bytes, name: str) -> io.BytesIO:
+    s = io.BytesIO(data)
+    s.name = name
+    return s
+
+
+def _load(sources: Source | Sequence[Source], role: str):
+    """(name, kind, decompressed bytes) of each file of a role; a file of the wrong kind is refused."""
+    for src in _items(sources):
+        name = source_name(src)
+        data = load_bytes(src)
+        kind = _kind(data, role)
+        if kind not in _KINDS[role]:
+            what = _KIND_TEXT.get(kind)
+            raise InputError(
+                name, f"{what} given as {_OPTION[role]}; {_OPTION[role]} takes {_ACCEPTS[role]}" if what
+                else f"unknown format for {_OPTION[role]}: expected {_ACCEPTS[role]}",
+            )  # fmt: skip
+        yield name, kind, data
+
+
+def _kind(data: bytes, role: str) -> str:
+    """Content-based format of one (decompressed) file."""
+    if is_ubx(data[:64]):
+        return "ubx"
+    first = data[:200].split(b"\n", 1)[0].rstrip(b"\r")
+    if first[60:].strip() == b"RINEX VERSION / TYPE":
+        return {b"O": "rinex-obs", b"N": "rinex-nav", b"G": "rinex-nav", b"H": "rinex-nav"}.get(
+            first[20:21], "rinex-other"
+        )
+    if not data.strip():
+        return "ems" if role == "sbas" else "empty"  # an hour without messages is an empty EMS file
+    line = data.lstrip().split(b"\n", 1)[0]
+    if _EMS_LINE.match(line) or re.match(rb"^\s*\d{3} \d\d \d\d \d\d ", line):
+        return "ems"  # the EMS reader counts or explains malformed lines
+    return "unknown"
+
+
+# --------------------------------------------------------------------------- checks
+
+
+def _span(t_us: np.ndarray) -> str:
+    a, b = (
+        str(np.datetime64(int(v), "us").astype("datetime64[s]")).replace("T", " ")
+        for v in (t_us.min(), t_us.max())
+    )
+    return f"{a} - {b} GPST"
+
+
+def _check(inp: SbasInputs) -> dict:
+    """Refuse inputs that cannot give one solution; count what is missing or rejected."""
+    src = inp.station
+    gps = inp.obs.filter(pl.col("system") == "G") if inp.obs.height else inp.obs
+    if not gps.height or "C1C" not in gps.columns or gps["C1C"].is_nan().all():
+        raise InputError(src, "no GPS L1 C/A pseudoranges (C1C / RINEX 2 C1) in the observations")
+    t_obs = gps["time"].dt.epoch("us").to_numpy()
+    if not inp.eph.height:
+        raise InputError(
+            src, "no GPS broadcast ephemerides: give --nav with a RINEX navigation file "
+            "(or a u-blox log with AID-EPH or GPS subframes)",
+        )  # fmt: skip
+    covered = _ephemeris_coverage(gps, inp.eph)
+    if not covered.any():
+        t_eph = inp.eph["toe_time"].dt.epoch("us").to_numpy()
+        raise InputError(
+            src, f"no broadcast ephemeris covers the observations ({_span(t_obs)}); ephemerides "
+            f"have toe {_span(t_eph)}",
+        )  # fmt: skip
+    fr = inp.frames
+    if len(fr) == 0 or not fr.crc_ok.any():
+        raise InputError(
+            src, "no SBAS messages" + (" with a valid CRC" if len(fr) else "")
+            + ": give --sbas with EMS files (or a u-blox log with SBAS RXM-SFRB(X) frames)",
+        )  # fmt: skip
+    t_msg = fr.time[fr.crc_ok]
+    if t_msg.min() > t_obs.max() or t_msg.max() < t_obs.min():
+        raise InputError(
+            src, f"the SBAS messages ({_span(t_msg)}) do not overlap the observations ({_span(t_obs)})"
+        )
+    rejected: Counter = Counter()
+    for role, r in inp.reports:
+        for k, v in r.rejected.items():
+            rejected[f"{role}:{k}"] += v
+    missing = gps.filter(~pl.Series(covered))
+    return {
+        "rejected": dict(sorted(rejected.items())),
+        "bad_crc": int((~fr.crc_ok).sum()),
+        "missing_ephemeris_rows": missing.height,
+        "missing_ephemeris_prns": sorted(set(missing["prn"].to_list())),
+        "observation_rows": gps.height,
+        "observation_epochs": int(np.unique(t_obs).size),
+    }
+
+
+def _ephemeris_coverage(gps: pl.DataFrame, eph: pl.DataFrame) -> np.ndarray:
+    """Whether some record of the PRN (any health) has a fit interval covering each row's time."""
+    e = eph.select(
+        pl.col("prn").cast(pl.Int64), t=pl.col("toe_time").dt.epoch("us"),
+        half=(pl.when(pl.col("fit_interval") > 1).then(pl.col("fit_interval")).otherwise(4.0) * 1800 * US),
+    ).sort("t")  # fmt: skip
+    q = (
+        gps.select(pl.col("prn").cast(pl.Int64), t=pl.col("time").dt.epoch("us"))
+        .with_row_index("i")
+        .sort("t")
+    )
+    j = q.join_asof(
+        e.rename({"t": "toe"}),
+        left_on="t",
+        right_on="toe",
+        by="prn",
+        strategy="nearest",
+        check_sortedness=False,
+    )  # both sorted by time: sorted within each PRN too
+    ok = ((j["t"] - j["toe"]).abs() <= j["half"]).fill_null(False).to_numpy()
+    out = np.zeros(gps.height, bool)
+    out[j["i"].to_numpy()] = ok
+    return out
+
+
+# --------------------------------------------------------------------------- engine runs
+
+
+def _geo_schedule(obs: pl.DataFrame, frames: SbasFrames, geo: int | None) -> pl.DataFrame:
+    """GEO per observation epoch (see the module notes): columns ``time``, ``geo``."""
+    epochs = np.unique(obs.filter(pl.col("system") == "G")["time"].dt.epoch("us").to_numpy())
+    ok = frames.crc_ok
+    geos = sorted(set(frames.prn[ok].tolist()))
+    if geo is not None or len(geos) == 1:
+        g = geo if geo is not None else geos[0]
+        if g not in geos:
+            raise InputError("--geo", f"no messages of GEO {g} (present: {geos})")
+        chosen = np.full(epochs.size, g, np.int64)
+    else:
+        age = np.empty((len(geos), epochs.size))
+        for k, g in enumerate(geos):
+            tags = frames.time[ok & (frames.prn == g)]
+            i = np.searchsorted(tags, epochs, side="right") - 1
+            age[k] = np.where(i >= 0, (epochs - tags[np.maximum(i, 0)]) / US, np.inf)
+        best = np.argmin(age, axis=0)
+        chosen_k = np.empty(epochs.size, np.int64)
+        cur = int(best[0])
+        for e in range(epochs.size):  # a receiver tracks one GEO until it loses it
+            if age[cur, e] > GEO_SWITCH_S and age[best[e], e] < age[cur, e]:
+                cur = int(best[e])
+            chosen_k[e] = cur
+        chosen = np.asarray(geos)[chosen_k]
+    return pl.DataFrame(
+        {"time": pl.Series(epochs).cast(pl.Datetime("us")), "geo": pl.Series(chosen, dtype=pl.Int16)}
+    )
+
+
+def _run(inp: SbasInputs, msgs, ref, opt: SbasOptions, schedule: pl.DataFrame) -> SbasResult:
+    """One engine run per GEO over its epochs; tables concatenated in time order."""
+    parts = []
+    for g in schedule["geo"].unique().sort().to_list():
+        times = schedule.filter(pl.col("geo") == g)["time"]
+        obs = inp.obs.filter(pl.col("time").is_in(times.implode()))
+        o = SbasOptions(
+            mode=opt.mode, mask_deg=opt.mask_deg, geo=int(g), flight_time=opt.flight_time, aad=opt.aad
+        )
+        r = run_sbas(obs, inp.eph, msgs, ref, station=inp.station, options=o)
+        geo_col = pl.lit(g, pl.Int16).alias("geo")
+        parts.append((r.epochs.with_columns(geo_col), r.satellites.with_columns(geo_col), r.counts))
+    if len(parts) == 1:
+        e, s, c = parts[0]
+        return SbasResult(epochs=e, satellites=s, counts=c)
+    reasons: Counter = Counter()
+    for _, _, c in parts:
+        reasons.update(c["reasons"])
+    return SbasResult(
+        epochs=pl.concat([p[0] for p in parts]).sort("time"),
+        satellites=pl.concat([p[1] for p in parts]).sort("time", "prn"),
+        counts={"epochs": sum(p[2]["epochs"] for p in parts), "rows": sum(p[2]["rows"] for p in parts),
+                "reasons": dict(sorted(reasons.items()))},
+    )  # fmt: skip
+
+
+def _shift(ref, epochs: pl.DataFrame) -> tuple[float, float, float]:
+    """The reference moved by the mean east/north/up error of the epochs with a solution."""
+    sol = epochs.filter(pl.col("vpl").is_finite())
+    if not sol.height:
+        raise InputError("--reference mean", "no epoch has an SBAS solution: no mean position")
+    lat, lon, h = pymap3d.ecef2geodetic(*ref)
+    x, y, z = pymap3d.enu2ecef(sol["east"].mean(), sol["north"].mean(), sol["vpe"].mean(), lat, lon, h)
+    return float(x), float(y), float(z)
+
+
+def _spp(obs: pl.DataFrame, eph: pl.DataFrame, name: str, n_epochs: int = 60) -> tuple[float, float, float]:
+    """Median of plain single-frequency least-squares positions (no atmosphere) over a few epochs.
+
+    Only the start point of the mean-position iteration: any error of tens of metres is removed
+    by the engine's passes.
+    """
+    gps = obs.filter((pl.col("system") == "G") & pl.col("C1C").is_finite())
+    epochs = np.unique(gps["time"].dt.epoch("us").to_numpy())
+    pick = epochs[np.linspace(0, epochs.size - 1, min(n_epochs, epochs.size)).astype(int)]
+    sols = []
+    for t in pick.tolist():
+        rows = gps.filter(pl.col("time").dt.epoch("us") == t)
+        prn = rows["prn"].to_numpy().astype(np.int64)
+        pr = rows["C1C"].to_numpy()
+        r = select_ephemeris(eph, prn, np.full(prn.size, t))
+        ok = r >= 0
+        if ok.sum() < 5:
+            continue
+        st = broadcast_state(eph, r[ok], np.full(ok.sum(), t), -pr[ok] / SPEED_OF_LIGHT)
+        y0 = pr[ok] + SPEED_OF_LIGHT * (st.clock - st.tgd)
+        x = np.zeros(4)
+        for _ in range(10):
+            sat = rotate_earth(st.position, np.linalg.norm(st.position - x[:3], axis=1) / SPEED_OF_LIGHT)
+            rho = np.linalg.norm(sat - x[:3], axis=1)
+            g = np.column_stack([(x[:3] - sat) / rho[:, None], np.ones(rho.size)])
+            dx = np.linalg.lstsq(g, y0 - rho - x[3], rcond=None)[0]
+            x += dx
+            if np.linalg.norm(dx[:3]) < 1e-3:
+                break
+        if 6.2e6 < np.linalg.norm(x[:3]) < 6.5e6:
+            sols.append(x[:3])
+    if not sols:
+        raise InputError(name, "no epoch with 5 satellites and ephemerides: cannot find a starting position")
+    m = np.median(np.asarray(sols), axis=0)
+    return float(m[0]), float(m[1]), float(m[2])
