@@ -204,3 +204,14 @@ def test_bad_lines_and_files(tmp_path):
     cut.write_bytes(raw[: len(raw) // 2])
     with pytest.raises(InputError, match="truncated or corrupt gzip"):
         read_sp3(cut)
+
+
+def test_clock_query_just_before_an_epoch_is_interpolated_not_nan():
+    """A transmission time (an SP3 epoch minus ~70 ms) falls in the interval before that epoch."""
+    sp, _ = read_sp3(IGS)
+    col = int(np.flatnonzero(np.isfinite(sp.clock[9]) & np.isfinite(sp.clock[10]))[0])
+    t = sp.time[10]
+    before = interpolate_clock(sp, np.array([col]), np.array([t]), -0.07)[0]
+    c0, c1 = sp.clock[9, col], sp.clock[10, col]
+    dt = (sp.time[10] - sp.time[9]) / 1e6
+    assert before == pytest.approx(c1 + (c0 - c1) * 0.07 / dt, rel=0, abs=1e-15)

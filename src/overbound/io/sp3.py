@@ -456,7 +456,9 @@ def interpolate_clock(
     """Satellite clock offsets (s) at GPS times ``time_us + offset_s``, linear between epochs."""
     col, t, off = _queries(sp3, sat, time_us, offset_s)
     tq = t.ravel()
-    i = np.clip(np.searchsorted(sp3.time, tq, side="right") - 1, 0, len(sp3.time) - 2)
+    # the interval holding the query time itself (time + offset), not just its whole part
+    tf = tq + np.floor(off.ravel() * US).astype(np.int64)
+    i = np.clip(np.searchsorted(sp3.time, tf, side="right") - 1, 0, len(sp3.time) - 2)
     t0, t1 = sp3.time[i], sp3.time[i + 1]
     frac = ((tq - t0) / US + off.ravel()) / ((t1 - t0) / US)
     c = np.maximum(col.ravel(), 0)
