@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import polars as pl
+import pymap3d
 import pytest
 
 from overbound.io.ems import read_ems
@@ -21,9 +22,16 @@ from overbound.io.rinex_nav import read_rinex_nav
 from overbound.io.rinex_obs import read_rinex_obs
 from overbound.io.schema import REQUIRED
 from overbound.sbas import iono, tropo
-from overbound.sbas.corrections import previous_other_value
-from overbound.sbas.engine import REASONS, SbasOptions, run_sbas
-from overbound.sbas.messages import decode
+from overbound.sbas.corrections import earliest_within, previous_other_value
+from overbound.sbas.engine import (
+    REASONS,
+    SbasOptions,
+    _covariance_delta,
+    _in_regions,
+    _service_sets,
+    run_sbas,
+)
+from overbound.sbas.messages import AI, DELTA_UDRE, FC_TIMEOUT_PA, decode
 from overbound.sbas.solution import weighted_least_squares
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "sbas"
@@ -401,3 +409,225 @@ def test_npa_without_mt10_uses_the_8_m_sigma_flt():
     assert npa.height > 0
     np.testing.assert_allclose(npa["sigma_flt"], npa["sigma_udre"] * npa["delta_udre"] + 8.0, rtol=1e-12)
     assert (npa["eps_fc"] == 0).all() and (npa["eps_ltc"] == 0).all()
+
+
+# --- MT 28 clock-ephemeris covariance (DO-229D A.4.4.16, A.4.5.1.1) ----------------------------------------
+R_NAMES = ("r11", "r12", "r13", "r14", "r22", "r23", "r24", "r33", "r34", "r44")
+
+
+@functools.cache
+def _msas_covariance() -> pl.DataFrame:
+    return decode(read_ems([DATA / "msas" / "ubx_20080526_sbas.ems.gz"])[0]).covariance
+
+
+def _delta_udre_numpy(row: dict, los: np.ndarray, ccov: float) -> float:
+    """sqrt(I^T C I) + C_cov 2^(scale_exp - 5), with C = R^T R from the upper-triangular R."""
+    r = np.zeros((4, 4))
+    r[np.triu_indices(4)] = [row[n] for n in R_NAMES]
+    c = r.T @ r
+    i = np.append(los, 1.0)
+    return float(np.sqrt(i @ c @ i) + ccov * 2.0 ** (row["scale_exp"] - 5))
+
+
+def test_mt28_delta_udre_from_real_msas_messages():
+    cov = _msas_covariance()
+    assert cov.height == 50 and cov["scale_exp"].n_unique() > 1  # 25 messages, two satellites each
+    # the decoder's scaling: every stored element is an integer number of 2^(scale_exp - 5)
+    lsb = 2.0 ** (pl.col("scale_exp").cast(pl.Float64) - 5)
+    raw = cov.select(pl.col(n) / lsb for n in R_NAMES).to_numpy()
+    assert np.array_equal(raw, np.round(raw)) and (raw[:, [0, 4, 7, 9]] >= 0).all()
+    rng = np.random.default_rng(28)
+    los = rng.normal(size=(cov.height, 3))
+    los /= np.linalg.norm(los, axis=1, keepdims=True)
+    ccov = np.full(cov.height, 0.3)
+    ours = _covariance_delta(cov, np.arange(cov.height), los, ccov)
+    expected = [_delta_udre_numpy(row, los[k], 0.3) for k, row in enumerate(cov.iter_rows(named=True))]
+    np.testing.assert_allclose(ours, expected, rtol=1e-12)
+    assert np.isnan(_covariance_delta(cov, np.array([-1]), los[:1], ccov[:1])).all()
+
+
+def _with_mt28(msgs, skip_prn: int, stop: dict[int, str]):
+    """EGNOS messages without MT 27 and with MT 28 built from the MSAS R factors: every 120 s for every GPS
+    satellite of the mask except ``skip_prn``, until ``stop[prn]`` (a time of 2019-01-14) for some."""
+    msas = _msas_covariance()
+    gps = msgs.mask.filter(pl.col("system") == "GPS").unique(("iodp", "position", "sv")).sort("position")
+    t0 = dt.datetime(2019, 1, 14, 19, 29)
+    rows = []
+    for j in range(82):
+        t = t0 + dt.timedelta(seconds=120 * j)
+        for k, (iodp, pos, sv) in enumerate(gps.select("iodp", "position", "sv").iter_rows()):
+            if sv == skip_prn or (sv in stop and t > dt.datetime.fromisoformat(f"2019-01-14T{stop[sv]}")):
+                continue
+            src = msas.row(k % msas.height, named=True)
+            rows.append({"time": t, "geo": 123, "iodp": iodp, "position": pos, "scale_exp": src["scale_exp"]}
+                        | {n: src[n] for n in R_NAMES})  # fmt: skip
+    cov = pl.DataFrame(rows).cast(msgs.covariance.schema).select(msgs.covariance.columns)
+    deg = msgs.degradation.with_columns(ccovariance=pl.lit(0.4), cer=pl.lit(2.5))
+    tables = msgs.tables() | {"covariance": cov, "degradation": deg, "service": msgs.service.clear(),
+                              "service_regions": msgs.service_regions.clear()}  # fmt: skip
+    return type(msgs)(**tables, counts=msgs.counts), cov, gps
+
+
+def _los_ecef(sats: pl.DataFrame, ref: tuple[float, float, float]) -> np.ndarray:
+    """Unit line of sight in ECEF from the reported elevation and azimuth (ENU at the reference)."""
+    lat, lon, _ = pymap3d.ecef2geodetic(*ref, deg=False)
+    el, az = np.deg2rad(sats["elevation"].to_numpy()), np.deg2rad(sats["azimuth"].to_numpy())
+    enu = np.stack([np.cos(el) * np.sin(az), np.cos(el) * np.cos(az), np.sin(el)], axis=1)
+    rot = np.array([[-np.sin(lon), -np.sin(lat) * np.cos(lon), np.cos(lat) * np.cos(lon)],
+                    [np.cos(lon), -np.sin(lat) * np.sin(lon), np.cos(lat) * np.sin(lon)],
+                    [0.0, np.cos(lat), np.sin(lat)]])  # fmt: skip
+    return enu @ rot.T
+
+
+def test_mt28_end_to_end_delta_udre_and_timeouts():
+    obs, msgs = _evening_inputs()
+    m28, cov, gps = _with_mt28(msgs, skip_prn=5, stop={21: "20:31:00"})
+    pa = _run(m28, "PA").satellites
+    used = pa.filter("used", pl.col("time").dt.minute() % 5 == 0, pl.col("time").dt.second() == 0)
+    assert used.height > 200 and (used["delta_udre"] > 1).all()
+    pos = gps.filter(pl.col("sv").is_in(used["prn"].cast(pl.Int64).implode()))
+    los = _los_ecef(used, obs.header.approx_position)
+    for k, row in enumerate(used.iter_rows(named=True)):
+        p = int(pos.filter(pl.col("sv") == row["prn"])["position"][0])
+        c = cov.filter(pl.col("position") == p, pl.col("time") <= row["time"] - dt.timedelta(seconds=0.12))
+        expected = _delta_udre_numpy(c.row(-1, named=True), los[k], 0.4)
+        assert row["delta_udre"] == pytest.approx(expected, rel=1e-7), row["prn"]
+    # PRN 5 has no MT 28 while MT 28 is in use: no PA; PRN 21's last MT 28 (20:31) times out after 240 s
+    assert set(pa.filter(pl.col("prn") == 5, pl.col("elevation") > 10)["reason"]) == {"no_mt28"}
+    late = pl.col("time").is_between(pl.datetime(2019, 1, 14, 20, 35, 30),
+                                     pl.datetime(2019, 1, 14, 20, 36, 30))  # fmt: skip
+    p21 = pl.col("prn") == 21
+    assert pa.filter(p21, late).height == 3 and set(pa.filter(p21, late)["reason"]) == {"mt28_timeout"}
+    npa = _run(m28, "NPA").satellites
+    n6 = npa.filter(p21, late)
+    assert n6["used"].all() and (n6["eps_er"] == 2.5).all() and (n6["delta_udre"] > 1).all()  # 240-360 s
+    after = npa.filter(p21, pl.col("time") > pl.datetime(2019, 1, 14, 20, 37, 30))  # past 360 s: delta-UDRE 1
+    assert after.height > 0 and (after["delta_udre"] == 1).all()
+    assert (npa.filter(pl.col("prn") == 5)["delta_udre"] == 1).all()
+    # MT 27 and MT 28 both held: delta-UDRE 1 (an SBAS sends only one of them)
+    both = type(m28)(**(m28.tables() | {"service": msgs.service, "service_regions": msgs.service_regions}),
+                     counts=msgs.counts)  # fmt: skip
+    b = _run(both, "PA").satellites.filter("used", pl.col("time") > pl.datetime(2019, 1, 14, 19, 33))
+    assert b.height > 0 and (b["delta_udre"] == 1).all()
+
+
+# --- MT 27 service message (DO-229D A.4.4.13) -----------------------------------------------------------
+def _mt27(messages: list[dict], regions: list[tuple]) -> tuple[pl.DataFrame, pl.DataFrame]:
+    """Service and region tables as the decoder makes them; ``regions``: (message index, lat1, lon1,
+    lat2, lon2, square)."""
+    t0 = dt.datetime(2019, 1, 14, 19, 0)
+    s = pl.DataFrame([{"time": t0 + dt.timedelta(seconds=10 * k), "geo": 123,
+                       "n_regions": sum(r[0] == k for r in regions)} | m
+                      for k, m in enumerate(messages)])  # fmt: skip
+    factor = dict(enumerate(DELTA_UDRE))
+    s = s.with_columns(dudre_in=pl.col("dudrei_in").replace_strict(factor),
+                       dudre_out=pl.col("dudrei_out").replace_strict(factor))  # fmt: skip
+    reg = pl.DataFrame(
+        [{"time": s["time"][k], "geo": 123, "iods": messages[k]["iods"],
+          "message_number": messages[k]["message_number"], "region": j + 1, "lat1": a, "lon1": b,
+          "lat2": c, "lon2": d, "square": sq} for j, (k, a, b, c, d, sq) in enumerate(regions)],
+    )  # fmt: skip
+    return s, reg
+
+
+def _msg(iods, n, number, priority, din, dout):
+    return {"iods": iods, "n_messages": n, "message_number": number, "priority": priority,
+            "dudrei_in": din, "dudrei_out": dout}  # fmt: skip
+
+
+def test_mt27_triangle_third_corner_and_squares():
+    _, reg = _mt27([_msg(0, 1, 1, 0, 0, 15)], [(0, 40, 0, 50, 10, False), (0, 40, 0, 50, 10, True)])
+    # triangle (40, 0), (50, 10) and the third corner (lat1, lon2) = (40, 10): the south-east half
+    assert _in_regions(reg, 42.0, 8.0).tolist() == [True, True]
+    assert _in_regions(reg, 48.0, 2.0).tolist() == [False, True]
+    assert _in_regions(reg, 45.0, 5.0).tolist() == [True, True]  # on the hypotenuse
+    assert _in_regions(reg, 39.0, 5.0).tolist() == [False, False]
+
+
+def test_mt27_priority_ties_outside_and_incomplete_sets():
+    msgs = [_msg(1, 2, 1, 1, 3, 9), _msg(1, 2, 2, 2, 5, 9),  # IODS 1: message 2 has the higher priority
+            _msg(2, 2, 1, 0, 1, 12),  # IODS 2 incomplete: IODS 1 stays in force
+            _msg(2, 2, 2, 0, 2, 12)]  # fmt: skip
+    regions = [(0, 40, 0, 50, 10, True), (1, 44, 4, 46, 6, True), (2, 40, 0, 50, 10, True),
+               (3, 30, -10, 55, 20, True), (3, 0, 0, 1, 1, True)]  # fmt: skip
+    s, reg = _mt27(msgs, regions)
+    v, t_set = _service_sets(s, reg, 45.0, 5.0)
+    assert np.isnan(v[0])  # one message of two
+    assert v[1] == DELTA_UDRE[5] and v[2] == DELTA_UDRE[5]  # the higher-priority region
+    assert v[3] == DELTA_UDRE[1]  # equal priorities: the smaller delta-UDRE_in
+    st = s["time"].dt.epoch("us").to_numpy()
+    assert t_set[1] == st[0] and t_set[2] == st[0] and t_set[3] == st[2]
+    v_out, _ = _service_sets(s, reg, 60.0, 5.0)
+    assert v_out[1] == DELTA_UDRE[9] and v_out[3] == DELTA_UDRE[12]  # outside every region
+
+
+def _with_service(msgs, s: pl.DataFrame, reg: pl.DataFrame):
+    new = {
+        "service": s.select(msgs.service.columns).cast(msgs.service.schema),
+        "service_regions": reg.select(msgs.service_regions.columns).cast(msgs.service_regions.schema),
+    }
+    return type(msgs)(**(msgs.tables() | new), counts=msgs.counts)
+
+
+def test_mt27_incomplete_set_loses_pa_and_gives_one_in_npa():
+    _, msgs = _evening_inputs()
+    s, reg = _mt27([_msg(3, 2, 1, 0, 4, 4)], [(0, -80, -170, 80, 170, True)])
+    cut = _with_service(msgs, s, reg)
+    pa = _run(cut, "PA").satellites
+    assert not pa["used"].any() and (pa["reason"] == "mt27_incomplete").sum() > 0
+    npa = _run(cut, "NPA").satellites.filter("used")
+    assert npa.height > 0 and (npa["delta_udre"] == 1).all()
+    s2, reg2 = _mt27([_msg(3, 1, 1, 0, 4, 9)], [(0, -80, -170, 80, 170, True)])  # complete: inside, 2.0
+    full = _with_service(msgs, s2, reg2)
+    u = _run(full, "PA").satellites.filter("used")
+    assert u.height > 0 and (u["delta_udre"] == DELTA_UDRE[4]).all()
+
+
+# --- IODF = 3 alarm in the range-rate correction (DO-229D A.4.4.3, A.4.5.1.2) ------------------------------
+def test_earliest_within_picks_the_largest_gap_below_the_window():
+    key = np.array([1, 1, 1, 1, 2, 1])
+    t = np.array([0, 4, 8, 12, 11, 16]) * 1_000_000
+    got = earliest_within(key, t, np.array([3, 5, 0, -1, 4]), np.array([9.0, 9.0, 9.0, 9.0, 9.0]) * 1e6, 0)
+    assert got.tolist() == [1, 2, -1, -1, -1]  # 12 s: 8 s back (4 s); 16 s: 8 s back; first row: none
+
+
+def test_iodf3_alarm_takes_the_previous_prc_closest_to_half_the_timeout():
+    _, msgs = _evening_inputs()
+    ai11 = msgs.fc_degradation.with_columns(ai_index=pl.lit(11, pl.UInt8), ai=pl.lit(AI[11]))
+    deg = msgs.degradation.with_columns(brrc=pl.lit(0.2))
+    sel = (pl.col("position") == 28) & (pl.col("iodp") == 0)  # PRN 29
+    # distinct PRCs so that the RRC tells which previous PRC was taken (the real ones barely move)
+    f = msgs.fast.with_columns(prc=pl.when(sel).then(0.125 * (pl.int_range(pl.len()) % 7)).otherwise("prc"))
+    tags = f.filter(sel)["time"].to_list()
+    prc = dict(zip(tags, f.filter(sel)["prc"].to_list(), strict=True))
+    iodf = dict(zip(tags, f.filter(sel)["iodf"].to_list(), strict=True))
+    sec = dt.timedelta(seconds=1)
+
+    def current(t):  # the PRC in force at epoch t: the last tag at least the 0.12 s flight time before
+        return max(x for x in tags if x <= t - 0.12 * sec)
+
+    def regular(t):  # PRCs 4, 8 and 12 s before the current one
+        return all(current(t) - k * sec in prc for k in (4, 8, 12))
+
+    grid = [dt.datetime(2019, 1, 14, 20, 0) + 30 * k * sec for k in range(60)]
+    e1, e2, e3 = next(g for g in zip(grid, grid[1:], grid[2:], strict=False) if all(map(regular, g)))
+    alarms = [current(e1), current(e2) - 4 * sec]  # current IODF 3 at e1, previous IODF 3 at e2
+    fast = f.with_columns(iodf=pl.when(sel & pl.col("time").is_in(alarms)).then(3).otherwise("iodf")
+                          .cast(f["iodf"].dtype))  # fmt: skip
+    m = type(msgs)(**(msgs.tables() | {"fast": fast, "fc_degradation": ai11, "degradation": deg}),
+                   counts=msgs.counts)  # fmt: skip
+    sats = _run(m, "PA").satellites.filter(pl.col("prn") == 29)
+    half = FC_TIMEOUT_PA[11] / 2  # I_fc = 18 s for every satellite; PRCs every 4 s
+    for e in (e1, e2):  # alarm: the previous PRC 8 s back (the largest gap below 9 s)
+        r = sats.filter(pl.col("time") == e).row(0, named=True)
+        c = current(e)
+        t_tof = (e - c).total_seconds() + 1.0
+        assert r["used"]
+        assert r["rrc"] == pytest.approx((prc[c] - prc[c - 8 * sec]) / 8, abs=1e-12)
+        assert r["eps_rrc"] == pytest.approx((AI[11] * abs(8 - half) / 2 + 0.2 / 8) * t_tof, rel=1e-9)
+    # no alarm at e3: the last two PRCs; eps_rrc 0 when their IODFs are in sequence
+    c = current(e3)
+    r = sats.filter(pl.col("time") == e3).row(0, named=True)
+    assert r["rrc"] == pytest.approx((prc[c] - prc[c - 4 * sec]) / 4, abs=1e-12)
+    in_seq = (iodf[c] - iodf[c - 4 * sec]) % 3 == 1
+    assert in_seq and r["eps_rrc"] == 0

@@ -18,7 +18,9 @@ from __future__ import annotations
 import numpy as np
 import polars as pl
 
-__all__ = ["US", "asof", "previous_other_value", "previous_same_key", "segments", "times_us"]
+__all__ = [
+    "US", "asof", "earliest_within", "previous_other_value", "previous_same_key", "segments", "times_us",
+]  # fmt: skip
 
 US = 1_000_000
 _SPAN = np.int64(1) << np.int64(42)  # 50 days of microseconds: key in the upper bits
@@ -58,6 +60,32 @@ def previous_same_key(key_tab: np.ndarray, t_tab: np.ndarray, base: int) -> np.n
     same = key_tab[order][1:] == key_tab[order][:-1]
     prev[order[1:][same]] = order[:-1][same]
     return prev
+
+
+def earliest_within(
+    key_tab: np.ndarray, t_tab: np.ndarray, rows: np.ndarray, window_us: np.ndarray, base: int
+) -> np.ndarray:
+    """For query rows of the table, the earliest earlier row of the same key less than ``window_us`` older.
+
+    That is the previous row whose time difference is the largest one below the window (-1 if
+    there is none, or for ``rows < 0``): the IODF = 3 rule of DO-229D A.4.4.3 with the window
+    I_fc / 2.
+    """
+    key_tab = np.asarray(key_tab, np.int64)
+    t_tab = np.asarray(t_tab, np.int64)
+    rows = np.asarray(rows, np.int64)
+    if key_tab.size == 0:
+        return np.full(rows.shape, -1, np.int64)
+    packed = key_tab * _SPAN + np.clip(t_tab - base, 0, _SPAN - 1)
+    order = np.argsort(packed, kind="stable")
+    sp = packed[order]
+    r = np.maximum(rows, 0)
+    lo = np.nan_to_num(t_tab[r] - np.asarray(window_us, float), nan=np.inf)
+    lo = np.clip(lo, base, base + _SPAN - 1).astype(np.int64)
+    pos = np.searchsorted(sp, key_tab[r] * _SPAN + (lo - base), side="right")
+    cand = order[np.minimum(pos, sp.size - 1)]
+    ok = (rows >= 0) & (pos < sp.size) & (key_tab[cand] == key_tab[r]) & (t_tab[cand] < t_tab[r])
+    return np.where(ok, cand, -1)
 
 
 def previous_other_value(

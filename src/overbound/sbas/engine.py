@@ -17,7 +17,10 @@ What is modelled (DO-229D appendix A and J; the time model is that of
   range-rate correction RRC from the last two PRCs of the satellite (A.4.4.3), applied as
   PRC + RRC (t - t_of); PRC time-out from the MT 7 indicator (Table A-8), RRC time-outs (the PRCs
   more than the smallest time-out of the mask apart, or propagated beyond 8 times their spacing);
-  fast-correction history restarts after 4 or more missing messages and after a UDREI 14/15;
+  fast-correction history restarts after 4 or more missing messages and after a UDREI 14/15; with
+  an alarm (IODF 3) in the current or previous fast correction the RRC takes the previous PRC with
+  the largest spacing below I_fc / 2 (else the last one if within I_fc) and eps_rrc = (a_i |dt -
+  I_fc / 2| / 2 + B_rrc / dt)(t - t_of) (A.4.4.3, A.4.5.1.2; no usable previous PRC: RRC 0, as gLAB);
 * long-term corrections (MT 25, velocity codes 0 and 1) matched to the broadcast ephemeris by IODE
   (A.4.4.7); when the ephemeris of the newest IODE is not held (the SBAS changed IODE before the
   user has it), the last correction of the previous IODE, with that ephemeris, until it times out
@@ -27,7 +30,11 @@ What is modelled (DO-229D appendix A and J; the time model is that of
   else (a_i I_fc / 4 + B_rrc / dt) (t - t_of)), eps_ltc (velocity code 0:
   C_ltc_v0 floor((t - t_ltc) / I_ltc_v0); code 1: C_ltc_lsb + C_ltc_v1 max(0, t_0 - t, t - t_0 -
   I_ltc_v1) outside the validity interval), eps_er (below, NPA); sigma_flt with the MT 10 RSS_UDRE
-  flag and the MT 27 delta-UDRE (square regions; 1 when neither MT 27 nor MT 28 is received);
+  flag and delta-UDRE: MT 27 (A.4.4.13: complete IODS sets only, the highest-priority region holding
+  the user, the smallest delta-UDRE_in among equal priorities, delta-UDRE_out outside all regions;
+  triangles with the third corner (lat1, lon2), :data:`TRIANGLE_THIRD_CORNER`) or MT 28 (A.4.4.16,
+  A.4.5.1.1: sqrt(I^T R^T R I) + C_covariance 2^(scale_exp - 5), I = [unit line of sight, 1]); 1 when
+  neither or both are received;
 * the grid ionosphere (cells chosen from the IGP mask alone, then four-point, three-point or no
   interpolation by the selected IGPs' state, A.4.4.10.2-3, :mod:`overbound.sbas.iono`) with
   sigma_UIVE from GIVE and eps_iono (C_iono_step floor((t - t_iono) /
@@ -42,7 +49,9 @@ Satellites are not used, with the first reason in this order: ``no_pseudorange``
 ``mask_timeout``, ``not_in_mask``, ``no_mt10``, ``mt10_timeout``, ``no_fast_correction``,
 ``udre_timeout``, ``not_monitored`` (UDREI 14), ``do_not_use`` (UDREI 15), ``udrei_pa`` (UDREI >= 12
 in PA), ``no_mt7``, ``mt7_timeout``, ``prc_timeout``, ``single_prc``, ``rrc_timeout``,
-``rrc_propagation``, ``no_long_term``, ``long_term_timeout``, ``no_ephemeris_iode``,
+``rrc_propagation``, ``mt27_incomplete`` (MT 27 held, no complete IODS set), ``mt27_timeout``,
+``no_mt28`` (MT 28 in use, none for this satellite), ``mt28_timeout``, ``no_long_term``,
+``long_term_timeout``, ``no_ephemeris_iode``,
 ``elevation``, ``iono_mask_timeout``, ``no_igp_cell`` (no cell or triangle of IGPs in the mask),
 ``iono_outside_triangle`` (one IGP of the cell unusable and the pierce point outside the other
 three), ``no_iono`` (other grid failures), ``too_few_satellites``.
@@ -53,11 +62,12 @@ NPA mode (``mode="NPA"``) differs from PA as DO-229D prescribes:
 * the NPA column of the time-outs: Table A-25 (MT 6/UDRE 18 s, MT 7 and MT 10 360 s, MT 25 360 s,
   the others as PA) and Table A-8 (fast corrections by MT 7 indicator, 18-180 s);
 * the PA-only checks keep the satellite: 4 or more missing messages (``messages_lost``, 2.1.1.4.12)
-  end PA only; UDREI 12-13 (``udrei_pa``) are usable; without MT 10, or with MT 10 timed out,
+  end PA only; without a usable MT 27 set or MT 28 delta-UDRE is 1; UDREI 12-13 (``udrei_pa``) are
+  usable; without MT 10, or with MT 10 timed out,
   sigma_flt = (sigma_UDRE delta_UDRE + 8 m)^2 and the MT 10 degradation terms (eps_fc, eps_rrc,
   eps_ltc, eps_iono) are not applied (A.4.5.1);
-* eps_er = C_er (MT 10) once the fast or the long-term correction is older than its PA time-out
-  but not its NPA one (A.4.5.1.4).
+* eps_er = C_er (MT 10) once the fast, the long-term or the MT 28 correction is older than its PA
+  time-out but not its NPA one (A.4.5.1.4).
 
 gLAB's NPA goes further than DO-229D, and this engine does not follow it: where the grid fails it
 uses the Klobuchar model (DO-229D allows the GPS broadcast model in NPA, with sigma_UIRE of J.2.3,
@@ -66,8 +76,8 @@ fast or long-term correction it uses the satellite with the MOPS-C sigma_flt of 
 broadcast IODE. On the evening Toulouse window those are the only rows gLAB uses and this engine
 does not (3 % of them); elsewhere the sigmas and PLs agree (tests/sbas/test_engine.py).
 
-Not handled yet: MT 28 covariance (delta-UDRE is 1 when MT 28 is present), MT 27 triangles,
-GEO ranging, pierce points poleward of 75 deg, the previous-mask (old IODP/IODI) fall-backs.
+Not handled yet: GEO ranging, pierce points poleward of 75 deg, the previous-mask (old IODP/IODI)
+fall-backs (MT 28 of the previous IODP included, which gLAB uses).
 """
 
 from __future__ import annotations
@@ -80,7 +90,15 @@ import pymap3d
 
 from overbound.io.rinex_nav import SPEED_OF_LIGHT, broadcast_state, rotate_earth
 from overbound.sbas import iono as ionomod
-from overbound.sbas.corrections import US, asof, previous_other_value, previous_same_key, segments, times_us
+from overbound.sbas.corrections import (
+    US,
+    asof,
+    earliest_within,
+    previous_other_value,
+    previous_same_key,
+    segments,
+    times_us,
+)
 from overbound.sbas.messages import FC_TIMEOUT_NPA, FC_TIMEOUT_PA, SbasMessages
 from overbound.sbas.solution import K_H_NPA, K_H_PA, K_V_PA, weighted_least_squares
 from overbound.sbas.tropo import mops_tropo
@@ -94,13 +112,18 @@ REASONS = (
     "used", "no_pseudorange", "messages_lost", "no_mask", "mask_timeout", "not_in_mask", "no_mt10",
     "mt10_timeout", "no_fast_correction", "udre_timeout", "not_monitored", "do_not_use", "udrei_pa",
     "no_mt7", "mt7_timeout", "prc_timeout", "single_prc", "rrc_timeout", "rrc_propagation",
+    "mt27_incomplete", "mt27_timeout", "no_mt28", "mt28_timeout",
     "no_long_term", "long_term_timeout", "no_ephemeris_iode", "elevation", "iono_mask_timeout", "no_igp_cell",
     "iono_outside_triangle", "no_iono", "too_few_satellites",
 )  # fmt: skip
 
 #: Message time-outs (s) for PA and NPA (DO-229D Table A-25), by message type.
-TIMEOUT_PA = {1: 600, 6: 12, 7: 240, 10: 240, 18: 1200, 25: 240, 26: 600, 27: 86400}
-TIMEOUT_NPA = {1: 600, 6: 18, 7: 360, 10: 360, 18: 1200, 25: 360, 26: 600, 27: 86400}
+TIMEOUT_PA = {1: 600, 6: 12, 7: 240, 10: 240, 18: 1200, 25: 240, 26: 600, 27: 86400, 28: 240}
+TIMEOUT_NPA = {1: 600, 6: 18, 7: 360, 10: 360, 18: 1200, 25: 360, 26: 600, 27: 86400, 28: 360}
+#: Third corner of an MT 27 triangle: "lat1_lon2" (gLAB) or "lat2_lon1" (MAAST). DO-229D A.4.4.13 names
+#: only two broadcast corners; the four corners of a square are (lat1, lon1), (lat2, lon2), (lat1, lon2),
+#: (lat2, lon1), and this engine reads the triangle as the first three of them, as gLAB does.
+TRIANGLE_THIRD_CORNER = "lat1_lon2"
 #: sigma_flt offset (m) when MT 10 is not held (DO-229D A.4.5.1: (sigma_UDRE delta_UDRE + 8 m)^2; NPA).
 SIGMA_FLT_NO_MT10 = 8.0
 
@@ -194,12 +217,16 @@ def run_sbas(
     fast = _fast(ctx, m, mask, seg_epoch, deg)
     for name, cond in fast.pop("flags"):
         flag(cond, name)
-    dudre = _delta_udre(ctx, m, lat, lon)
+    du = _delta_udre(ctx, m, mask, lat, lon)
+    for name, cond in du["flags"]:
+        flag(cond & pa, name)
     ltc = _long_term(ctx, m, mask, deg, eph)
     for name, cond in ltc.pop("flags"):
         flag(cond, name)
     geom = _geometry(ctx, eph, pr, ltc, rx, lat, lon)
     flag(geom["row"] < 0, "no_ephemeris_iode")
+    dudre = np.where(du["cov_row"] >= 0, _covariance_delta(m.covariance, du["cov_row"], geom["los"],
+                                                            deg["ccovariance"]), du["value"])  # fmt: skip
     flag(geom["elev"] < np.deg2rad(opt.mask_deg), "elevation")
     grid = _iono(ctx, m, geom, lat, lon, deg)
     flag(grid["mask_timeout"], "iono_mask_timeout")
@@ -213,7 +240,7 @@ def run_sbas(
     s_udre = np.sqrt(fast["sigma2_udre"]) * dudre
     eps_fc = np.where(no_mt10, 0.0, fast["eps_fc"])
     eps_rrc = np.where(no_mt10, 0.0, fast["eps_rrc"])
-    eps_er = _eps_er(ctx, fast, ltc, deg)
+    eps_er = _eps_er(ctx, fast, ltc, du, deg)
     eps = eps_fc + eps_rrc + ltc["eps_ltc"] + eps_er
     rss = deg["rss_udre"] > 0
     sig2_flt = np.where(rss, s_udre**2 + eps_fc**2 + eps_rrc**2 + ltc["eps_ltc"] ** 2 + eps_er**2,
@@ -437,16 +464,28 @@ def _fast(ctx: _Context, m: SbasMessages, mask: _Mask, seg_epoch: np.ndarray, de
     fc_tmout = np.asarray(FC_TIMEOUT_PA if pa else FC_TIMEOUT_NPA, float)
     tmout = fc_tmout[ai_index]
     tmin = _smallest_timeout(f7, r7, mask.n_sats, fc_tmout)
-    # RRC from the last two PRCs
+    # RRC from the last two PRCs; with an alarm (IODF 3) in the current or previous one, from the
+    # previous PRC closest to I_fc / 2 before the current one (DO-229D A.4.4.3, A.4.5.1.2)
+    iodf_tab = f["iodf"].to_numpy()
+    alarm = (iodf_f == 3) | (newer6 & (iodf6 == 3)) | (_take(iodf_tab, prev, fill=-9) == 3)
+    prev_a = prev  # the search sorts the whole table: only when some row has an alarm
+    if alarm.any():
+        prev_a = earliest_within(fkey, tf, np.where(alarm, r, -1), tmin * US / 2, ctx.base)
+    dt_prev = (tag_f - _take(tf, prev, fill=0)) / US
+    prev_a = np.where(prev_a >= 0, prev_a, np.where(dt_prev <= tmin, prev, -1))
+    prev = np.where(alarm, prev_a, prev)
     prc = _take(f["prc"].to_numpy(), r)
     prc_prev = _take(f["prc"].to_numpy(), prev)
     dt = (tag_f - _take(tf, prev, fill=0)) / US
     have2 = (prev >= 0) & (_take(f["udrei"].to_numpy(), prev, fill=15) < 14)
     t_of = (ctx.t - tag_f) / US + 1.0  # t - t_of, t_of = tag - 1 s
     rrc = np.where(have2 & (ai > 0), (prc - prc_prev) / np.where(dt > 0, dt, np.nan), 0.0)
-    in_seq = np.mod(iodf_f - _take(f["iodf"].to_numpy(), prev, fill=-9), 3) == 1
+    in_seq = np.mod(iodf_f - _take(iodf_tab, prev, fill=-9), 3) == 1
     brrc_dt = np.divide(deg["brrc"], dt, out=np.full(dt.shape, np.inf), where=dt > 0)
-    eps_rrc = np.where(in_seq | (ai == 0) | ~have2, 0.0, (ai * tmin / 4 + brrc_dt) * t_of)
+    off_half = np.abs(dt - tmin / 2)
+    eps_rrc = np.where(alarm, np.where(off_half == 0, 0.0, (ai * off_half / 2 + brrc_dt) * t_of),
+                       np.where(in_seq, 0.0, (ai * tmin / 4 + brrc_dt) * t_of))  # fmt: skip
+    eps_rrc = np.where((ai == 0) | ~have2, 0.0, eps_rrc)
     eps_fc = ai * ((ctx.t - t_u) / US + 1.0 + tlat) ** 2 / 2
     no_fc = r < 0
     flags = [
@@ -458,7 +497,7 @@ def _fast(ctx: _Context, m: SbasMessages, mask: _Mask, seg_epoch: np.ndarray, de
         ("no_mt7", r7 < 0),
         ("mt7_timeout", (r7 >= 0) & ctx.timed_out(f7, r7, 7)),
         ("prc_timeout", ctx.age(t_u) > tmout),
-        ("single_prc", ~have2),
+        ("single_prc", ~have2 & ~alarm),  # an alarm without a usable previous PRC: RRC 0
         ("rrc_timeout", have2 & (dt > tmin)),
         ("rrc_propagation", have2 & ((ctx.t - tag_f) / US > 8 * dt)),
     ]
@@ -469,13 +508,14 @@ def _fast(ctx: _Context, m: SbasMessages, mask: _Mask, seg_epoch: np.ndarray, de
     }  # fmt: skip
 
 
-def _eps_er(ctx: _Context, fast: dict, ltc: dict, deg: dict) -> np.ndarray:
-    """En-route degradation eps_er (DO-229D A.4.5.1.4): C_er (MT 10) in NPA once the fast or the
-    long-term correction has outlived its PA/APV time-out (Table A-8, A-25) but not its NPA one; 0 in PA,
-    where such a satellite is not used."""
+def _eps_er(ctx: _Context, fast: dict, ltc: dict, du: dict, deg: dict) -> np.ndarray:
+    """En-route degradation eps_er (DO-229D A.4.5.1.4): C_er (MT 10) in NPA once the fast, the
+    long-term or the MT 28 correction has outlived its PA/APV time-out (Table A-8, A-25; for MT 28
+    gLAB compares with the MT 25 one, the same 240 s) but not its NPA one; 0 in PA, where such a
+    satellite is not used."""
     if ctx.opt.mode == "PA":
         return np.zeros(ctx.t.size)
-    return np.where(fast["pa_timed_out"] | ltc["pa_timed_out"], deg["cer"], 0.0)
+    return np.where(fast["pa_timed_out"] | ltc["pa_timed_out"] | du["pa_timed_out"], deg["cer"], 0.0)
 
 
 def _smallest_timeout(
@@ -496,26 +536,127 @@ _SIGMA2_UDRE = (
 )  # fmt: skip
 
 
-def _delta_udre(ctx: _Context, m: SbasMessages, lat: float, lon: float) -> np.ndarray:
-    """MT 27 delta-UDRE at the user (square regions), 1 without MT 27 (DO-229D A.4.4.13)."""
-    s = m.service
-    r = _latest(ctx, s, 27)
-    if s.height == 0:
-        return np.ones(ctx.t.size)
-    inside = np.zeros(s.height, bool)
-    reg = m.service_regions.with_row_index("k")
+def _delta_udre(ctx: _Context, m: SbasMessages, mask: _Mask, lat: float, lon: float) -> dict:
+    """delta-UDRE sources (DO-229D A.4.4.13, A.4.4.16): the MT 27 value at the user, or the MT 28 row.
+
+    Only one of MT 27 and MT 28 is broadcast by an SBAS; with both held, or neither, delta-UDRE is 1
+    (as gLAB). The MT 28 value needs the line of sight and is completed by :func:`_covariance_delta`.
+    Flags (PA only): ``mt27_incomplete`` (no complete IODS set), ``mt27_timeout``, ``no_mt28`` (MT 28
+    in use but none for this satellite in the mask in force), ``mt28_timeout``.
+    """
+    n = ctx.t.size
+    s, cov = m.service, m.covariance
+    r27 = _latest(ctx, s, 27) if s.height else np.full(n, -1)
+    any28 = _latest(ctx, cov, 28) >= 0 if cov.height else np.zeros(n, bool)
+    use27 = (r27 >= 0) & ~any28
+    value = np.ones(n)
+    flags: list = []
+    if s.height:
+        v_set, t_set = _service_sets(s, m.service_regions, lat, lon)
+        v = _take(v_set, r27)
+        t_old = _take(t_set, r27, fill=0).astype(np.int64)
+        incomplete = use27 & ~np.isfinite(v)
+        timed_out = use27 & ~incomplete & (ctx.age(t_old) > ctx.timeout(27))
+        value = np.where(use27 & ~incomplete & ~timed_out, v, 1.0)
+        flags += [("mt27_incomplete", incomplete), ("mt27_timeout", timed_out)]
+    row = np.full(n, -1)
+    pa_timed_out = np.zeros(n, bool)
+    if cov.height:
+        tc = times_us(cov["time"])
+        key = cov["iodp"].to_numpy().astype(np.int64) * 64 + cov["position"].to_numpy()
+        r28 = asof(key, tc, mask.iodp * 64 + mask.position, ctx.t_avail, ctx.base)
+        r28 = np.where(any28 & (r27 < 0) & (mask.iodp >= 0), r28, -1)
+        age = ctx.age(_take(tc, r28, fill=0))
+        timed_out = (r28 >= 0) & (age > ctx.timeout(28))
+        flags += [("no_mt28", any28 & (r27 < 0) & (mask.iodp >= 0) & (r28 < 0)), ("mt28_timeout", timed_out)]
+        row = np.where(timed_out, -1, r28)
+        pa_timed_out = (row >= 0) & (age > TIMEOUT_PA[25])  # gLAB's eps_er test for MT 28 (NPA)
+    return {"value": value, "cov_row": row, "pa_timed_out": pa_timed_out, "flags": flags}
+
+
+def _service_sets(
+    s: pl.DataFrame, regions: pl.DataFrame, lat: float, lon: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """After each MT 27, the delta-UDRE at the user from the newest complete IODS set, and the time of that
+    set's oldest message (NaN and 0 when no set is complete) (DO-229D A.4.4.13).
+
+    A set is complete once messages 1..n_messages of one IODS are held; until a new IODS is complete the
+    previous complete set stays in force. The user takes the region of highest priority code that
+    contains it, the smallest delta-UDRE_in among equal priorities, and delta-UDRE_out outside all
+    regions.
+    """
     st = times_us(s["time"])
-    rt = times_us(reg["time"])
-    lat1, lat2 = reg["lat1"].to_numpy(), reg["lat2"].to_numpy()
-    lon1, lon2 = reg["lon1"].to_numpy(), reg["lon2"].to_numpy()
-    hit = (
-        reg["square"].to_numpy()
-        & (np.minimum(lat1, lat2) <= lat) & (lat <= np.maximum(lat1, lat2))
-        & (np.minimum(lon1, lon2) <= lon) & (lon <= np.maximum(lon1, lon2))
-    )  # fmt: skip
-    inside[np.searchsorted(st, rt[hit])] = True
-    value = np.where(inside, s["dudre_in"].to_numpy(), s["dudre_out"].to_numpy())
-    return np.where((r >= 0) & ~ctx.timed_out(s, r, 27), _take(value, r), 1.0)
+    inside = _in_regions(regions, lat, lon)
+    reg_t = times_us(regions["time"])
+    cols = {c: s[c].to_numpy() for c in ("iods", "n_messages", "message_number", "priority")}
+    din, dout = s["dudre_in"].to_numpy(), s["dudre_out"].to_numpy()
+    held: dict[int, dict[int, int]] = {}  # IODS -> message number -> row
+    value = np.full(s.height, np.nan)
+    t_set = np.zeros(s.height, np.int64)
+    current: tuple[float, int] = (np.nan, 0)
+    for k in range(s.height):
+        iods = int(cols["iods"][k])
+        held.setdefault(iods, {})[int(cols["message_number"][k])] = k
+        rows = [held[iods].get(j) for j in range(1, int(cols["n_messages"][k]) + 1)]
+        if all(x is not None for x in rows):
+            rows_a = np.asarray(rows)
+            hit = np.asarray([inside[reg_t == st[x]].any() for x in rows_a])  # regions of that message
+            if hit.any():
+                pri = cols["priority"][rows_a]
+                best = hit & (pri == pri[hit].max())
+                v = float(din[rows_a][best].min())
+            else:
+                v = float(dout[k])
+            current = (v, int(st[rows_a].min()))
+        value[k], t_set[k] = current
+    return value, t_set
+
+
+def _in_regions(regions: pl.DataFrame, lat: float, lon: float) -> np.ndarray:
+    """Whether the user is inside each MT 27 region (boundary included).
+
+    A square region spans the corners (lat1, lon1) and (lat2, lon2); a triangle is (lat1, lon1),
+    (lat2, lon2) and the third corner :data:`TRIANGLE_THIRD_CORNER` (see there). Longitudes are
+    taken as given (no region across the antimeridian).
+    """
+    la1, lo1 = regions["lat1"].to_numpy().astype(float), regions["lon1"].to_numpy().astype(float)
+    la2, lo2 = regions["lat2"].to_numpy().astype(float), regions["lon2"].to_numpy().astype(float)
+    square = regions["square"].to_numpy().astype(bool)
+    in_box = ((np.minimum(la1, la2) <= lat) & (lat <= np.maximum(la1, la2))
+              & (np.minimum(lo1, lo2) <= lon) & (lon <= np.maximum(lo1, lo2)))  # fmt: skip
+    la3, lo3 = (la1, lo2) if TRIANGLE_THIRD_CORNER == "lat1_lon2" else (la2, lo1)
+
+    def side(ax: np.ndarray, ay: np.ndarray, bx: np.ndarray, by: np.ndarray) -> np.ndarray:
+        return (bx - ax) * (lat - ay) - (by - ay) * (lon - ax)
+
+    d = np.stack([side(lo1, la1, lo2, la2), side(lo2, la2, lo3, la3), side(lo3, la3, lo1, la1)])
+    in_tri = (d >= 0).all(axis=0) | (d <= 0).all(axis=0)
+    return np.where(square, in_box, in_box & in_tri)
+
+
+def _covariance_delta(cov: pl.DataFrame, row: np.ndarray, los: np.ndarray, ccov: np.ndarray) -> np.ndarray:
+    """MT 28 delta-UDRE = sqrt(I^T C I) + eps_c (DO-229D A.4.5.1.1), NaN where ``row`` < 0.
+
+    C = R^T R from the scaled Cholesky factor, I = [unit line of sight user->satellite, 1], eps_c =
+    C_covariance 2^(scale_exp - 5) with ``ccov`` the MT 10 C_covariance (0 without MT 10).
+    """
+    out = np.full(row.size, np.nan)
+    i = np.flatnonzero(row >= 0)
+    if i.size == 0:
+        return out
+    e = {c: cov[c].to_numpy()[row[i]] for c in cov.columns if c.startswith("r")}
+    z = np.zeros(i.size)
+    rmat = np.stack([
+        np.stack([e["r11"], e["r12"], e["r13"], e["r14"]], -1),
+        np.stack([z, e["r22"], e["r23"], e["r24"]], -1),
+        np.stack([z, z, e["r33"], e["r34"]], -1),
+        np.stack([z, z, z, e["r44"]], -1),
+    ], axis=1)  # fmt: skip
+    vec = np.concatenate([los[i], np.ones((i.size, 1))], axis=1)
+    ri = np.einsum("nij,nj->ni", rmat, vec)  # I^T R^T R I = |R I|^2
+    scale = 2.0 ** (cov["scale_exp"].to_numpy()[row[i]].astype(float) - 5)
+    out[i] = np.linalg.norm(ri, axis=1) + ccov[i] * scale
+    return out
 
 
 def _long_term(ctx: _Context, m: SbasMessages, mask: _Mask, deg: dict, eph: pl.DataFrame) -> dict:
@@ -573,7 +714,7 @@ def _geometry(ctx: _Context, eph: pl.DataFrame, pr: np.ndarray, ltc: dict, rx: n
     row = ltc["eph_row"]
     ok = (row >= 0) & np.isfinite(pr)
     out = {"row": row, "rho": np.full(n, np.nan), "clock": np.full(n, np.nan), "tgd": np.full(n, np.nan),
-           "elev": np.full(n, -np.pi / 2), "azim": np.zeros(n)}  # fmt: skip
+           "elev": np.full(n, -np.pi / 2), "azim": np.zeros(n), "los": np.full((n, 3), np.nan)}  # fmt: skip
     if not ok.any():
         return out
     i = np.flatnonzero(ok)
@@ -589,6 +730,7 @@ def _geometry(ctx: _Context, eph: pl.DataFrame, pr: np.ndarray, ltc: dict, rx: n
     e, nn, u = pymap3d.ecef2enu(rot[:, 0], rot[:, 1], rot[:, 2], lat, lon,
                                 float(pymap3d.ecef2geodetic(*rx)[2]))  # fmt: skip
     out["rho"][i] = rho
+    out["los"][i] = (rot - rx) / rho[:, None]
     clock = st.clock
     if ctx.opt.relativity == "rv":  # -2 r.v / c^2 from the orbit itself (gLAB's choice)
         h = 1e-3
