@@ -82,6 +82,14 @@ def test_paper_orders_of_magnitude():
     log_r = float(log_ratio_exceedance(_rayleigh(0.065), 1.0))
     assert log_r == pytest.approx(stats.rayleigh.logsf(1.0, scale=0.065), rel=1e-13)
     assert abs(log_r / LN10 - math.log10(1.1e-52)) < 1.0
+    # and the paper's values are reproduced exactly by a sigma inside each rounding interval
+    for make, target, lo, hi in ((_normal, 1.5e-63, 0.0585, 0.0595), (_rayleigh, 1.1e-52, 0.0645, 0.0655)):
+
+        def gap(sig, make=make, target=target):
+            fit = make(0.0, sig) if make is _normal else make(sig)
+            return float(log_ratio_exceedance(fit, 1.0)) - math.log(target)
+
+        assert gap(lo) < 0 < gap(hi)  # a root in [lo, hi]: the paper's sigma rounds to 0.059 / 0.065
 
 
 @pytest.mark.parametrize(("m", "s"), [(0.0, 0.059), (0.12, 0.2), (-0.3, 0.05), (0.9, 0.4)])
