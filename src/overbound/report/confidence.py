@@ -33,7 +33,7 @@ from overbound.methods.confidence_level import (
 )
 from overbound.report.figures import new_figure, style
 from overbound.report.json import dumps
-from overbound.report.page import PAGE_CSS, escape, figure_html
+from overbound.report.page import escape, figure_html, write_page
 from overbound.stats.overbounding import SigmaInflation
 
 __all__ = [
@@ -568,19 +568,16 @@ def write_confidence_report(
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     body = "\n".join(confidence_section_html(a) for a in items)
-    text = (
-        '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
-        '<meta name="viewport" content="width=device-width, initial-scale=1">\n'
-        f'<meta name="generator" content="overbound {_e(__version__)}">\n'
-        f"<title>{_e(title)} — overbound</title>\n<style>{PAGE_CSS}</style>\n</head>\n<body>\n<main>\n"
-        f"<h1>{_e(title)}</h1>\n<p>Method of Comby, Farnworth and Macabiau, “EGNOS vertical protection "
-        "level assessment”, ION GPS/GNSS 2003: per PL band, independent samples, cdf overbounding, "
-        "and the probability that the PLs bound the errors at the integrity risk.</p>\n"
-        f"{body}\n</main>\n</body>\n</html>\n"
+    return write_page(
+        directory / REPORT_NAME,
+        title=title,
+        intro_html=(
+            "Method of Comby, Farnworth and Macabiau, “EGNOS vertical protection "
+            "level assessment”, ION GPS/GNSS 2003: per PL band, independent samples, cdf overbounding, "
+            "and the probability that the PLs bound the errors at the integrity risk."
+        ),
+        body_html=body,
     )
-    path = directory / REPORT_NAME
-    path.write_bytes(text.encode("utf-8"))
-    return path
 
 
 # ---------------------------------------------------------------------------

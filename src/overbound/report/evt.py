@@ -24,7 +24,6 @@ import numpy as np
 import polars as pl
 from matplotlib.axes import Axes
 
-from overbound import __version__
 from overbound.methods.tail_extrapolation import (
     APPROACH_S,
     TailAnalysis,
@@ -44,7 +43,7 @@ from overbound.report.evt_figures import (
     plot_vk,
 )
 from overbound.report.figures import style
-from overbound.report.page import PAGE_CSS, badge, escape, figure_html, percent, row_table, scientific
+from overbound.report.page import badge, escape, figure_html, percent, row_table, scientific, write_page
 from overbound.stats.dependence import VKCurve
 
 __all__ = [
@@ -595,21 +594,18 @@ def write_evt_report(
     body = "\n".join(
         evt_section_html(a, series=None if table is None else analysed_series(table, a)) for a in items
     )
-    text = (
-        '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
-        '<meta name="viewport" content="width=device-width, initial-scale=1">\n'
-        f'<meta name="generator" content="overbound {_e(__version__)}">\n'
-        f"<title>{_e(title)} — overbound</title>\n<style>{PAGE_CSS}</style>\n</head>\n<body>\n<main>\n"
-        f"<h1>{_e(title)}</h1>\n<p>Method of Veerman et al., “A tool for GNSS integrity verification "
-        "based on statistical extreme value theory” (GIMAT): dependence and declustering, threshold "
-        "choice, generalised Pareto tail extrapolated to SI = 1 with bootstrap and profile-likelihood "
-        "intervals, GEV on daily maxima, KRS and tail overbounding, and the HMI probability per "
-        "service level.</p>\n"
-        f"{body}\n</main>\n</body>\n</html>\n"
+    return write_page(
+        directory / REPORT_NAME,
+        title=title,
+        intro_html=(
+            "Method of Veerman et al., “A tool for GNSS integrity verification "
+            "based on statistical extreme value theory” (GIMAT): dependence and declustering, threshold "
+            "choice, generalised Pareto tail extrapolated to SI = 1 with bootstrap and profile-likelihood "
+            "intervals, GEV on daily maxima, KRS and tail overbounding, and the HMI probability per "
+            "service level."
+        ),
+        body_html=body,
     )
-    path = directory / REPORT_NAME
-    path.write_bytes(text.encode("utf-8"))
-    return path
 
 
 # ---------------------------------------------------------------------------

@@ -6,12 +6,23 @@ import base64
 import html
 import math
 from collections.abc import Sequence
+from pathlib import Path
 
 from matplotlib.axes import Axes
 
 from overbound.report.figures import close_figure, figure_png
 
-__all__ = ["FIGURE_DPI", "PAGE_CSS", "badge", "escape", "figure_html", "percent", "row_table", "scientific"]
+__all__ = [
+    "FIGURE_DPI",
+    "PAGE_CSS",
+    "badge",
+    "escape",
+    "figure_html",
+    "percent",
+    "row_table",
+    "scientific",
+    "write_page",
+]
 
 #: Resolution of the figures embedded in the pages.
 FIGURE_DPI = 110
@@ -141,3 +152,23 @@ def badge(meets: bool | None, name: str, note: str) -> str:
     """A pass / fail / no-estimate badge for the KPI ``name``, ``note`` as its tooltip."""
     kind, text = VERDICT[meets]
     return f'<span class="badge {kind}" data-kpi="{escape(name)}" title="{escape(note)}">{text}</span>'
+
+
+def write_page(path: str | Path, *, title: str, intro_html: str, body_html: str) -> Path:
+    """Write a standalone, self-contained page (inline CSS, no external resource, no timestamp).
+
+    ``intro_html`` is the paragraph under the title (already HTML), ``body_html`` the sections; the same
+    arguments give the same bytes.
+    """
+    from overbound import __version__  # the package imports report modules: import on use
+
+    text = (
+        '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
+        '<meta name="viewport" content="width=device-width, initial-scale=1">\n'
+        f'<meta name="generator" content="overbound {escape(__version__)}">\n'
+        f"<title>{escape(title)} — overbound</title>\n<style>{PAGE_CSS}</style>\n</head>\n<body>\n<main>\n"
+        f"<h1>{escape(title)}</h1>\n<p>{intro_html}</p>\n{body_html}\n</main>\n</body>\n</html>\n"
+    )
+    path = Path(path)
+    path.write_bytes(text.encode("utf-8"))
+    return path

@@ -35,7 +35,6 @@ from pathlib import Path
 import numpy as np
 import polars as pl
 
-from overbound import __version__
 from overbound.io.schema import as_numpy
 from overbound.methods.parametric import (
     AxisParametric,
@@ -46,7 +45,7 @@ from overbound.methods.parametric import (
 )
 from overbound.methods.pooling import PE_PL
 from overbound.report.figures import plot_timeseries, style
-from overbound.report.page import PAGE_CSS, badge, escape, figure_html, percent, row_table, scientific
+from overbound.report.page import badge, escape, figure_html, percent, row_table, scientific, write_page
 from overbound.report.parametric_figures import (
     TINY,
     LocalFit,
@@ -825,22 +824,19 @@ def write_parametric_report(
     """
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    text = (
-        '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
-        '<meta name="viewport" content="width=device-width, initial-scale=1">\n'
-        f'<meta name="generator" content="overbound {_e(__version__)}">\n'
-        f"<title>{_e(title)} — overbound</title>\n<style>{PAGE_CSS}</style>\n</head>\n<body>\n<main>\n"
-        f"<h1>{_e(title)}</h1>\n<p>Method of Kannemans, “An integrity, availability and continuity test "
-        "method for EGNOS/WAAS” (NLR-TP-2006-594): the ratio PE/PL fitted by a normal (vertical) or "
-        "Rayleigh (horizontal) law gives P<sub>MI</sub>; a Weibull fit of the PL the unavailability; "
-        "their product, integrated over the Stanford regions, P<sub>HMI</sub>; the 15&nbsp;s count over a "
-        "range of alert limits the non-continuity and its log-linear fit. Bounds at "
-        f"{percent(analysis.confidence)} from the effective sample sizes of the correlated series.</p>\n"
-        f"{parametric_section_html(analysis, table)}\n</main>\n</body>\n</html>\n"
+    return write_page(
+        directory / REPORT_NAME,
+        title=title,
+        intro_html=(
+            f"Method of Kannemans, “An integrity, availability and continuity test "
+            "method for EGNOS/WAAS” (NLR-TP-2006-594): the ratio PE/PL fitted by a normal (vertical) or "
+            "Rayleigh (horizontal) law gives P<sub>MI</sub>; a Weibull fit of the PL the unavailability; "
+            "their product, integrated over the Stanford regions, P<sub>HMI</sub>; the 15&nbsp;s count "
+            "over a range of alert limits the non-continuity and its log-linear fit. Bounds at "
+            f"{percent(analysis.confidence)} from the effective sample sizes of the correlated series."
+        ),
+        body_html=parametric_section_html(analysis, table),
     )
-    path = directory / REPORT_NAME
-    path.write_bytes(text.encode("utf-8"))
-    return path
 
 
 # ---------------------------------------------------------------------------
