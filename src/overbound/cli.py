@@ -108,6 +108,27 @@ _input_options = [
 ]
 
 
+def _output_dir(help_text: str):
+    """The ``-o/--output`` directory option of the analysis commands."""
+    return click.option(
+        "-o",
+        "--output",
+        "out_dir",
+        required=True,
+        type=click.Path(file_okay=False, path_type=Path),
+        help=help_text,
+    )
+
+
+_services_option = click.option(
+    "--service",
+    "services",
+    multiple=True,
+    metavar="NAME|NAME:HAL:VAL",
+    help="Service level (repeatable); default: all of NPA, APV-I, APV-II, LPV, LPV-200, CAT-I.",
+)
+
+
 def _with_input_options(f):
     for opt in reversed(_input_options):
         f = opt(f)
@@ -134,21 +155,8 @@ def _read_options(reference, reference_ecef, fmt, station, strict, start, end, c
 
 @main.command()
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
-@click.option(
-    "-o",
-    "--output",
-    "out_dir",
-    required=True,
-    type=click.Path(file_okay=False, path_type=Path),
-    help="Output directory for summary.json and report.html.",
-)
-@click.option(
-    "--service",
-    "services",
-    multiple=True,
-    metavar="NAME|NAME:HAL:VAL",
-    help="Service level (repeatable); default: all of NPA, APV-I, APV-II, LPV, LPV-200, CAT-I.",
-)
+@_output_dir("Output directory for summary.json and report.html.")
+@_services_option
 @_with_input_options
 @click.option(
     "--epochs",
@@ -432,14 +440,7 @@ def convert(source, out, **inputs_opts) -> None:
 
 @main.command()
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
-@click.option(
-    "-o",
-    "--output",
-    "out_dir",
-    required=True,
-    type=click.Path(file_okay=False, path_type=Path),
-    help="Output directory for confidence.json and confidence.html.",
-)
+@_output_dir("Output directory for confidence.json and confidence.html.")
 @click.option(
     "--axis",
     type=click.Choice(["vertical", "horizontal"]),
@@ -556,14 +557,7 @@ def _auto_or_float(*, below: float | None = None, minimum: float | None = None):
 
 @main.command()
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
-@click.option(
-    "-o",
-    "--output",
-    "out_dir",
-    required=True,
-    type=click.Path(file_okay=False, path_type=Path),
-    help="Output directory for evt.json and evt.html.",
-)
+@_output_dir("Output directory for evt.json and evt.html.")
 @click.option(
     "--axis",
     type=click.Choice(["vertical", "horizontal"]),
@@ -653,21 +647,8 @@ def _decorrelation_option(ctx, param, value: str) -> str | float:
 
 @main.command()
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
-@click.option(
-    "-o",
-    "--output",
-    "out_dir",
-    required=True,
-    type=click.Path(file_okay=False, path_type=Path),
-    help="Output directory for parametric.json and parametric.html.",
-)
-@click.option(
-    "--service",
-    "services",
-    multiple=True,
-    metavar="NAME|NAME:HAL:VAL",
-    help="Service level (repeatable); default: all of NPA, APV-I, APV-II, LPV, LPV-200, CAT-I.",
-)
+@_output_dir("Output directory for parametric.json and parametric.html.")
+@_services_option
 @click.option(
     "--decorrelation",
     default="auto",
