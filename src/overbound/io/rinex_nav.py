@@ -67,9 +67,12 @@ __all__ = [
     "GpsEphemerides",
     "NavHeader",
     "broadcast_state",
+    "clock_at",
+    "ephemeris_elements",
     "read_rinex_nav",
     "rotate_earth",
     "select_ephemeris",
+    "state_at",
 ]
 
 #: Earth's gravitational constant for GPS user equations, m^3/s^2 (IS-GPS-200 Table 20-IV).
@@ -496,21 +499,58 @@ def broadcast_state(
         the sub-microsecond transmission time of a pseudorange).
     """
     rows = np.asarray(rows, np.int64)
-    if (rows < 0).any():
-        raise ValueError("rows must be >= 0 (select_ephemeris gives -1 where no ephemeris qualifies)")
     rows, time_us, offset = np.broadcast_arrays(
         rows, np.asarray(time_us, np.int64), np.asarray(offset_s, float)
     )
-    g = {c: eph[c].to_numpy()[rows] for c in ("e", "sqrt_a", "delta_n", "m0", "omega", "cuc", "cus", "crc",
-                                                "crs", "cic", "cis", "i0", "idot", "omega0", "omega_dot",
-                                                "toe", "af0", "af1", "af2", "tgd")}  # fmt: skip
-    toe_us = eph["toe_time"].dt.epoch("us").to_numpy()[rows]
-    toc_us = eph["toc"].dt.epoch("us").to_numpy()[rows]
-    tk = (time_us - toe_us) / US + offset
+    return state_at(ephemeris_elements(eph, rows), time_us, offset)
+
+
+#: Columns of :attr:`GpsEphemerides.table` that :func:`state_at` needs.
+_ELEMENTS = ("e", "sqrt_a", "delta_n", "m0", "omega", "cuc", "cus", "crc", "crs", "cic", "cis", "i0", "idot",
+             "omega0", "omega_dot", "toe", "af0", "af1", "af2", "tgd")  # fmt: skip
+
+
+def ephemeris_elements(eph: pl.DataFrame, rows: np.ndarray) -> dict[str, np.ndarray]:
+    """The broadcast elements of ``eph[rows]`` (and ``toe_us``, ``toc_us``), gathered once for
+    :func:`state_at` and :func:`clock_at` (several evaluations of the same records)."""
+    rows = np.asarray(rows, np.int64)
+    if (rows < 0).any():
+        raise ValueError("rows must be >= 0 (select_ephemeris gives -1 where no ephemeris qualifies)")
+    g = {c: eph[c].to_numpy()[rows] for c in _ELEMENTS}
+    g["toe_us"] = eph["toe_time"].dt.epoch("us").to_numpy()[rows]
+    g["toc_us"] = eph["toc"].dt.epoch("us").to_numpy()[rows]
+    return g
+
+
+def _anomaly(g: dict[str, np.ndarray], time_us: np.ndarray, offset: np.ndarray | float) -> tuple:
+    """t_k, A and E_k (IS-GPS-200 Table 20-IV)."""
+    tk = (time_us - g["toe_us"]) / US + offset
     a = g["sqrt_a"] ** 2
     n = np.sqrt(GPS_MU / a**3) + g["delta_n"]
     mk = g["m0"] + n * tk
-    ek = _kepler(mk, g["e"])
+    return tk, a, _kepler(mk, g["e"])
+
+
+def _clock(g: dict[str, np.ndarray], time_us: np.ndarray, offset: np.ndarray | float,
+           sin_e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Clock offset and its relativistic term (IS-GPS-200 20.3.3.3.3.1)."""
+    dt = (time_us - g["toc_us"]) / US + offset
+    rel = GPS_F * g["e"] * g["sqrt_a"] * sin_e
+    return g["af0"] + g["af1"] * dt + g["af2"] * dt**2 + rel, rel
+
+
+def clock_at(g: dict[str, np.ndarray], time_us: np.ndarray, offset_s: np.ndarray | float = 0.0) -> np.ndarray:
+    """``state_at(g, time_us, offset_s).clock`` without the orbit (the same numbers, less work)."""
+    _, _, ek = _anomaly(g, np.asarray(time_us, np.int64), offset_s)
+    return _clock(g, np.asarray(time_us, np.int64), offset_s, np.sin(ek))[0]
+
+
+def state_at(
+    g: dict[str, np.ndarray], time_us: np.ndarray, offset_s: np.ndarray | float = 0.0
+) -> BroadcastState:
+    """:func:`broadcast_state` of elements already gathered by :func:`ephemeris_elements`."""
+    time_us = np.asarray(time_us, np.int64)
+    tk, a, ek = _anomaly(g, time_us, offset_s)
     sin_e, cos_e = np.sin(ek), np.cos(ek)
     nu = np.arctan2(np.sqrt(1.0 - g["e"] ** 2) * sin_e, cos_e - g["e"])
     phi = nu + g["omega"]
@@ -524,9 +564,7 @@ def broadcast_state(
     pos = np.stack(
         [xp * cos_o - yp * cos_i * sin_o, xp * sin_o + yp * cos_i * cos_o, yp * np.sin(inc)], axis=-1
     )
-    dt = (time_us - toc_us) / US + offset
-    rel = GPS_F * g["e"] * g["sqrt_a"] * sin_e
-    clock = g["af0"] + g["af1"] * dt + g["af2"] * dt**2 + rel
+    clock, rel = _clock(g, time_us, offset_s, sin_e)
     return BroadcastState(pos, clock, rel, g["tgd"], ek)
 
 

@@ -44,11 +44,19 @@ def asof(key_tab: np.ndarray, t_tab: np.ndarray, key_q: np.ndarray, t_q: np.ndar
     order = np.argsort(packed, kind="stable")
     sp = packed[order]
     kq = np.asarray(key_q, np.int64)
-    q = kq * _SPAN + np.clip(np.asarray(t_q, np.int64) - base, 0, _SPAN - 1)
+    q = kq * _SPAN + _offset(t_q, base)
     pos = np.searchsorted(sp, q, side="right") - 1
-    row = np.where(pos >= 0, order[np.maximum(pos, 0)], -1)
-    hit = (pos >= 0) & (key_tab[np.maximum(row, 0)] == kq)
-    return np.where(hit, row, -1)
+    p0 = np.maximum(pos, 0)
+    hit = (pos >= 0) & (key_tab[order][p0] == kq)
+    return np.where(hit, order[p0], -1)
+
+
+def _offset(t: np.ndarray, base: int) -> np.ndarray:
+    """``t - base`` clipped to the packing range (the clip, a full pass, only when something is outside)."""
+    d = np.asarray(t, np.int64) - base
+    if d.size and (d.min() < 0 or d.max() > _SPAN - 1):
+        d = np.clip(d, 0, _SPAN - 1)
+    return d
 
 
 def previous_same_key(key_tab: np.ndarray, t_tab: np.ndarray, base: int) -> np.ndarray:

@@ -88,7 +88,7 @@ import numpy as np
 import polars as pl
 import pymap3d
 
-from overbound.io.rinex_nav import SPEED_OF_LIGHT, broadcast_state, rotate_earth
+from overbound.io.rinex_nav import SPEED_OF_LIGHT, clock_at, ephemeris_elements, rotate_earth, state_at
 from overbound.sbas import iono as ionomod
 from overbound.sbas.corrections import (
     US,
@@ -189,11 +189,14 @@ def run_sbas(
     t = times_us(obs["time"])
     prn = obs["prn"].to_numpy().astype(np.int64)
     pr = obs["C1C"].to_numpy().astype(float)
-    epochs_us, epoch = np.unique(t, return_inverse=True)
+    new_epoch = np.ones(t.size, bool)  # rows are sorted by time: an epoch starts where t changes
+    new_epoch[1:] = t[1:] != t[:-1]
+    epochs_us, epoch = t[new_epoch], np.cumsum(new_epoch) - 1
     m = _select_geo(msgs, opt.geo)
     rx = np.asarray(reference_ecef, float)
     lat, lon, h = (float(v) for v in pymap3d.ecef2geodetic(*rx))
-    ctx = _Context(t=t, prn=prn, opt=opt, base=int(min(t.min(), times_us(m.log["time"]).min())) - 10**12)
+    ctx = _Context(t=t, prn=prn, opt=opt, base=int(min(t.min(), times_us(m.log["time"]).min())) - 10**12,
+                   epoch=epoch, epochs_us=epochs_us)  # fmt: skip
     reason = np.zeros(t.size, np.int16)
 
     def flag(cond: np.ndarray, name: str) -> None:
@@ -281,7 +284,7 @@ def run_sbas(
             "time": obs["time"],
             "prn": obs["prn"],
             "used": used & ~too_few,
-            "reason": pl.Series(np.asarray(REASONS)[reason]),
+            "reason": pl.Series(REASONS, dtype=pl.String).gather(reason.astype(np.int64)),
             "elevation": elev_deg,
             "azimuth": np.rad2deg(geom["azim"]),
             "pseudorange": pr,
@@ -313,9 +316,10 @@ def run_sbas(
             "residual": sol.residual,
         }
     )  # fmt: skip
-    names, n_by = np.unique(np.asarray(REASONS)[reason], return_counts=True)
+    n_by = np.bincount(reason, minlength=len(REASONS))
     counts = {"epochs": int(epochs_us.size), "rows": int(t.size),
-              "reasons": {str(k): int(v) for k, v in zip(names, n_by, strict=True)}}  # fmt: skip
+              "reasons": {REASONS[i]: int(n_by[i]) for i in sorted(np.flatnonzero(n_by).tolist(),
+                                                                    key=REASONS.__getitem__)}}  # fmt: skip
     return SbasResult(epochs=epochs, satellites=sats, counts=counts)
 
 
@@ -326,6 +330,8 @@ class _Context:
     prn: np.ndarray
     opt: SbasOptions
     base: int
+    epoch: np.ndarray  # epoch index per row
+    epochs_us: np.ndarray  # time of each epoch (us)
 
     @property
     def t_avail(self) -> np.ndarray:
@@ -347,10 +353,12 @@ def _take(values: np.ndarray, rows: np.ndarray, fill: float = np.nan) -> np.ndar
     """``values[rows]`` with ``fill`` where rows < 0."""
     if values.size == 0:
         return np.full(rows.shape, fill, dtype=float if isinstance(fill, float) else np.int64)
-    out = values[np.maximum(rows, 0)]
+    neg = rows < 0
+    some = bool(neg.any())  # often none: skip the clamp and the fill
+    out = values[np.maximum(rows, 0) if some else rows]
     if out.dtype.kind in "iub":  # signed 64-bit (or float) so that differences and fills do not wrap
         out = out.astype(float if isinstance(fill, float) else np.int64)
-    return np.where(rows >= 0, out, fill)
+    return np.where(neg, fill, out) if some else out
 
 
 def _ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -719,9 +727,10 @@ def _geometry(ctx: _Context, eph: pl.DataFrame, pr: np.ndarray, ltc: dict, rx: n
         return out
     i = np.flatnonzero(ok)
     tau0 = pr[i] / C
-    st = broadcast_state(eph, row[i], ctx.t[i], -tau0)
-    tx = -tau0 - st.clock  # transmission time offset from the epoch, s (receiver clock ~ 0 is not assumed:
-    st = broadcast_state(eph, row[i], ctx.t[i], tx)  # the clock bias cancels in the solution's clock term)
+    el = ephemeris_elements(eph, row[i])  # gathered once for every evaluation below
+    ti = ctx.t[i]
+    tx = -tau0 - clock_at(el, ti, -tau0)  # transmission time offset from the epoch, s (receiver clock ~ 0
+    st = state_at(el, ti, tx)  # is not assumed: the clock bias cancels in the solution's clock term)
     pos = st.position + np.stack([ltc["dx"][i], ltc["dy"][i], ltc["dz"][i]], axis=-1)
     for _ in range(2):
         rho = np.linalg.norm(pos - rx, axis=-1)
@@ -734,8 +743,7 @@ def _geometry(ctx: _Context, eph: pl.DataFrame, pr: np.ndarray, ltc: dict, rx: n
     clock = st.clock
     if ctx.opt.relativity == "rv":  # -2 r.v / c^2 from the orbit itself (gLAB's choice)
         h = 1e-3
-        vel = (broadcast_state(eph, row[i], ctx.t[i], tx + h).position
-               - broadcast_state(eph, row[i], ctx.t[i], tx - h).position) / (2 * h)  # fmt: skip
+        vel = (state_at(el, ti, tx + h).position - state_at(el, ti, tx - h).position) / (2 * h)
         clock = clock - st.relativistic - 2.0 * np.sum(st.position * vel, axis=-1) / C**2
     out["clock"][i] = clock + ltc["daf0_t"][i]
     out["tgd"][i] = st.tgd
@@ -782,44 +790,63 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
     idx = np.flatnonzero(sel)
     flight_us = round(ctx.opt.flight_time * US)
 
-    # mask membership: (band, IODI, IGP position) of every MT 18 bit
+    # The mask in force changes rarely: per epoch, the IODI of each band, and per distinct set of band
+    # IODIs ("mask version") which 5-degree IGP positions are in the mask.
     mk_pos = mk.drop_nulls(("lat", "lon"))
     member = np.unique(_mask_code(mk_pos["band"].to_numpy(), mk_pos["iodi"].to_numpy(),
                                   _grid_key(mk_pos["lat"].to_numpy(), mk_pos["lon"].to_numpy())))  # fmt: skip
     bands = np.unique(band_key)
+    ep_t, ep = ctx.epochs_us - flight_us, ctx.epoch  # the same t_avail for every row of an epoch
+    # IODI per (band, epoch), -2 where no MT 18 of the band; a last row of -2 for bands not in the mask
+    iodi_ep = np.full((bands.size + 1, ep_t.size), -2, np.int64)
+    for i_b, b in enumerate(bands.tolist()):
+        iodi_ep[i_b] = _band_iodi(mk, band_key, tmk, np.full(ep_t.size, b, np.int64), ep_t, ctx.base)
+    change = np.ones(ep_t.size, bool)  # a new mask version where any band's IODI changes
+    change[1:] = (iodi_ep[:, 1:] != iodi_ep[:, :-1]).any(axis=0)
+    version_ep = np.cumsum(change) - 1
+    versions = iodi_ep[:-1, change].T
+    all_keys = np.arange(_N_GRID_KEYS, dtype=np.int64)
+    in_version = np.zeros((versions.shape[0], _N_GRID_KEYS), bool)
+    for v, iodis in enumerate(versions.tolist()):
+        for b, iodi_b in zip(bands.tolist(), iodis, strict=True):
+            if iodi_b >= 0:
+                in_version[v] |= np.isin(_mask_code(b, iodi_b, all_keys), member)
 
     def in_mask(rows: np.ndarray, clat: np.ndarray, clon: np.ndarray) -> np.ndarray:
-        tq = np.repeat(t_av[idx[rows]][:, None], 4, axis=1)
-        key = _grid_key(clat, clon)
-        out = np.zeros(clat.shape, bool)
-        for b in bands.tolist():
-            iodi_b = _band_iodi(mk, band_key, tmk, np.full(tq.shape, b, np.int64), tq, ctx.base)
-            out |= (iodi_b >= 0) & np.isin(_mask_code(b, iodi_b, key), member)
-        return out
+        return in_version[version_ep[ep[idx[rows]]][:, None], _grid_key(clat, clon)]
+
+    g_band = g["band"].to_numpy().astype(np.int64)
+    pos_b = np.searchsorted(bands, g_band)  # row of iodi_ep of each grid value's band
+    known = pos_b < bands.size
+    known[known] = bands[pos_b[known]] == g_band[known]
+    g_band_row = np.where(known, pos_b, bands.size)
+    found_r: dict[str, np.ndarray] = {}
 
     def status(rows: np.ndarray, clat: np.ndarray, clon: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         tq = np.repeat(t_av[idx[rows]][:, None], 4, axis=1)
         r = asof(gkey, tg, _grid_key(clat, clon).ravel(), tq.ravel(), ctx.base).reshape(clat.shape)
+        found_r["rows"], found_r["r"] = rows, r  # kept for the interpolation below
         age = (tq + flight_us - _take(tg, r, fill=0)) / US - ctx.opt.flight_time
-        band = _take(g["band"].to_numpy(), r, fill=0).astype(np.int64)
-        current = (r >= 0) & (_take(g["iodi"].to_numpy(), r, fill=-1)
-                              == _band_iodi(mk, band_key, tmk, band, tq, ctx.base))  # fmt: skip
+        band_iodi = iodi_ep[_take(g_band_row, r, fill=bands.size), ep[idx[rows]][:, None]]
+        current = (r >= 0) & (_take(g["iodi"].to_numpy(), r, fill=-1) == band_iodi)
         usable = current & (age <= ctx.timeout(26)) & np.isfinite(_take(g["sigma2_give"].to_numpy(), r))
         return usable, current & _take(g["givd_dnu"].to_numpy(), r, fill=False).astype(bool)
 
     sel = ionomod.select_and_interpolate(np.rad2deg(lat_pp[idx]), np.rad2deg(lon_pp[idx]), in_mask, status)
-    ok_sub, clat, clon, w, mode_sub = sel.ok, sel.clat, sel.clon, sel.weights, sel.mode
-    k = _grid_key(clat, clon)
-    tq = np.repeat(t_av[idx][:, None], 4, axis=1)
-    r = asof(gkey, tg, k.ravel(), tq.ravel(), ctx.base).reshape(k.shape)
+    ok_sub, w, mode_sub = sel.ok, sel.weights, sel.mode
+    # only pierce points with a cell can have a correction (ok_sub False elsewhere): the grid values
+    # are those of status()'s look-up
+    f, r = found_r.get("rows", np.zeros(0, np.int64)), found_r.get("r", np.zeros((0, 4), np.int64))
+    tq = np.repeat(t_av[idx[f]][:, None], 4, axis=1)
     givd = np.nan_to_num(_take(g["givd"].to_numpy(), r))
     s2give = np.nan_to_num(_take(g["sigma2_give"].to_numpy(), r))
     t_iono = (tq + flight_us - _take(tg, r, fill=0)) / US + 1.0  # t - (tag - 1)
-    d = {k2: deg[k2][idx][:, None] for k2 in ("ciono_step", "iiono", "ciono_ramp", "rss_iono")}
+    d = {k2: deg[k2][idx[f]][:, None] for k2 in ("ciono_step", "iiono", "ciono_ramp", "rss_iono")}
     eps = d["ciono_step"] * np.floor(_ratio(t_iono, d["iiono"])) + d["ciono_ramp"] * t_iono
     s2grid = np.where(d["rss_iono"] > 0, s2give + eps**2, (np.sqrt(s2give) + eps) ** 2)
-    vert = (w * givd).sum(axis=1)
-    s2uive = (w * s2grid).sum(axis=1)
+    vert, s2uive = np.zeros(idx.size), np.zeros(idx.size)
+    vert[f] = (w[f] * givd).sum(axis=1)
+    s2uive[f] = (w[f] * s2grid).sum(axis=1)
     ok = np.zeros(n, bool)
     ok[idx] = ok_sub
     mode = np.full(n, -1)
@@ -836,6 +863,10 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
     return {"ok": ok, "mode": mode, "fail": fail, "slant": slant, "sigma2_uire": s2uire, "fpp": fpp,
             "mask_timeout": mask_to,
             "ipp_lat": np.rad2deg(lat_pp), "ipp_lon": np.rad2deg(lon_pp)}  # fmt: skip
+
+
+#: Number of :func:`_grid_key` values (latitudes -90..90 by 5 deg, 72 longitudes).
+_N_GRID_KEYS = 37 * 72
 
 
 def _grid_key(lat: np.ndarray, lon: np.ndarray) -> np.ndarray:

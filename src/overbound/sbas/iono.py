@@ -67,16 +67,21 @@ def _triangle_weights(x: np.ndarray, y: np.ndarray, missing: np.ndarray) -> np.n
 
     Columns are NE, NW, SW, SE; ``missing`` is the index of the corner left out (0..3).
     """
-    one = np.ones_like(x)
-    zero = np.zeros_like(x)
-    forms = (
-        (zero, y, 1 - x - y, x),  # without NE: SW + x (SE - SW) + y (NW - SW)
-        (y, zero, 1 - x, x - y),  # without NW: SW + x (SE - SW) + y (NE - SE)
-        (x + y - one, 1 - x, zero, 1 - y),  # without SW: NE - (1-x)(NE - NW) - (1-y)(NE - SE)
-        (x, y - x, 1 - y, zero),  # without SE: SW + y (NW - SW) + x (NE - NW)
-    )
-    table = np.stack([np.stack(f, axis=-1) for f in forms])  # (4 forms, n, 4)
-    return table[missing, np.arange(x.size)]
+    out = np.empty((x.size, 4))
+    for k in range(4):  # each point's own form only
+        i = np.flatnonzero(missing == k)
+        xi, yi = x[i], y[i]
+        zero = np.zeros_like(xi)
+        if k == 0:  # without NE: SW + x (SE - SW) + y (NW - SW)
+            form = (zero, yi, 1 - xi - yi, xi)
+        elif k == 1:  # without NW: SW + x (SE - SW) + y (NE - SE)
+            form = (yi, zero, 1 - xi, xi - yi)
+        elif k == 2:  # without SW: NE - (1-x)(NE - NW) - (1-y)(NE - SE)
+            form = (xi + yi - 1.0, 1 - xi, zero, 1 - yi)
+        else:  # without SE: SW + y (NW - SW) + x (NE - NW)
+            form = (xi, yi - xi, 1 - yi, zero)
+        out[i] = np.stack(form, axis=-1)
+    return out
 
 
 class GridSelection(NamedTuple):
@@ -185,7 +190,8 @@ def select_and_interpolate(
         if want == 4:
             good = m.all(axis=1)
         else:
-            good = (m.sum(axis=1) == 3) & _triangle_ok(m, xx, yy)[2]
+            good = m.sum(axis=1) == 3
+            good[good] = _triangle_ok(m[good], xx[good], yy[good])[2]  # only where three are in the mask
         g = idx[good]
         found[g] = True
         clat[g], clon[g], x[g], y[g], sel[g] = la[good], lo[good], xx[good], yy[good], m[good]
