@@ -17,9 +17,12 @@ from overbound.io.rinex_nav import (
     GPS_OMEGA_E,
     SPEED_OF_LIGHT,
     broadcast_state,
+    clock_at,
+    ephemeris_elements,
     read_rinex_nav,
     rotate_earth,
     select_ephemeris,
+    state_at,
 )
 from overbound.io.schema import InputError
 from overbound.io.sp3 import read_sp3
@@ -269,3 +272,19 @@ def test_bad_inputs(tmp_path):
     headless.write_text("\n".join(lines[:5]))
     with pytest.raises(InputError, match="no END OF HEADER"):
         read_rinex_nav(headless)
+
+
+def test_gathered_elements_give_broadcast_state_bit_for_bit():
+    """state_at/clock_at on elements gathered once (the engine's fast path) equal broadcast_state exactly."""
+    eph, _ = read_rinex_nav(BRDC)
+    rows = np.flatnonzero(eph.table["health"].to_numpy() == 0)
+    t = eph.table["toe_time"].dt.epoch("us").to_numpy()[rows] + 1234 * _US
+    off = np.linspace(-0.09, -0.06, rows.size)  # transmission-time offsets
+    ref = broadcast_state(eph.table, rows, t, off)
+    g = ephemeris_elements(eph.table, rows)
+    st = state_at(g, t, off)
+    np.testing.assert_array_equal(st.position, ref.position)
+    np.testing.assert_array_equal(st.clock, ref.clock)
+    np.testing.assert_array_equal(clock_at(g, t, off), ref.clock)
+    with pytest.raises(ValueError, match="rows must be >= 0"):
+        ephemeris_elements(eph.table, np.array([-1]))
