@@ -35,6 +35,7 @@ __all__ = [
     "parse_digits",
     "parse_fixed",
     "parse_float",
+    "rinex_version",
     "to_gpst",
 ]
 
@@ -291,3 +292,24 @@ def to_gpst(t_us: np.ndarray, time_system: str, name: str) -> np.ndarray:
     if ts == "TAI":
         return t_us - _TAI_US
     raise InputError(name, f"unknown time system {time_system!r} (GPS, GAL, QZS, IRN, GLO, UTC, BDT, TAI)")
+
+
+def rinex_version(lines: Lines, name: str, expected: str) -> tuple[float, str]:
+    """Version and first line of a RINEX file, checked (``expected``: "observation", "navigation"...).
+
+    Raises
+    ------
+    InputError
+        Empty file, no ``RINEX VERSION / TYPE`` first line, or an unreadable version.
+    """
+    if len(lines) == 0 or lines.length[0] == 0:
+        raise InputError(name, f"empty file, expected a RINEX {expected} file")
+    first = lines.text(0)
+    if first[60:].strip() != "RINEX VERSION / TYPE":
+        raise InputError(
+            name, f"not a RINEX file: first line {first[:60].rstrip()!r} has no 'RINEX VERSION / TYPE'"
+        )
+    try:
+        return float(first[:9]), first
+    except ValueError:
+        raise InputError(name, f"unreadable RINEX version {first[:9]!r}", line=1) from None

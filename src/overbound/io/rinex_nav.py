@@ -51,6 +51,7 @@ from overbound.io._rinex import (
     load_bytes,
     parse_digits,
     parse_float,
+    rinex_version,
     to_gpst,
 )
 from overbound.io.open import Source, source_name
@@ -249,17 +250,7 @@ def _record_ends(starts: np.ndarray, nonblank: np.ndarray, n: int) -> np.ndarray
 
 
 def _parse_header(lines: Lines, name: str) -> tuple[NavHeader, int]:
-    if len(lines) == 0 or lines.length[0] == 0:
-        raise InputError(name, "empty file, expected a RINEX navigation file")
-    first = lines.text(0)
-    if first[60:].strip() != "RINEX VERSION / TYPE":
-        raise InputError(
-            name, f"not a RINEX file: first line {first[:60].rstrip()!r} has no 'RINEX VERSION / TYPE'"
-        )
-    try:
-        version = float(first[:9])
-    except ValueError:
-        raise InputError(name, f"unreadable RINEX version {first[:9]!r}", line=1) from None
+    version, first = rinex_version(lines, name, "navigation")
     kind = first[20:21]
     if version < 3 and kind in ("G", "H"):
         what = "GLONASS" if kind == "G" else "GEO (SBAS)"

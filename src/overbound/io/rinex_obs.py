@@ -74,6 +74,7 @@ from overbound.io._rinex import (
     parse_digits,
     parse_fixed,
     parse_float,
+    rinex_version,
     to_gpst,
 )
 from overbound.io.open import Source, source_name
@@ -249,17 +250,7 @@ def read_rinex_obs(
 
 def _parse_header(lines: Lines, name: str) -> tuple[ObsHeader, int]:
     """The header fields and the index of the first body line."""
-    if len(lines) == 0 or lines.length[0] == 0:
-        raise InputError(name, "empty file, expected a RINEX observation file")
-    first = lines.text(0)
-    if first[60:].strip() != "RINEX VERSION / TYPE":
-        raise InputError(
-            name, f"not a RINEX file: first line {first[:60].rstrip()!r} has no 'RINEX VERSION / TYPE'"
-        )
-    try:
-        version = float(first[:9])
-    except ValueError:
-        raise InputError(name, f"unreadable RINEX version {first[:9]!r}", line=1) from None
+    version, first = rinex_version(lines, name, "observation")
     kind, system = first[20:21], (first[40:41].strip() or "G")
     if kind != "O":
         what = {"N": "navigation", "G": "GLONASS navigation", "H": "GEO navigation", "M": "meteorological"}
