@@ -126,5 +126,10 @@ def test_bad_input_and_drawing():
     from overbound.report.figures import plot_stanford
 
     res = all_subsets(sats, max_size=6)
-    ax = plot_stanford(res.vertical, res.counts["vertical"], alert_limit=50.0, service="APV-I (all subsets)")
+    ax = plot_stanford(
+        res.vertical, res.counts["vertical"], alert_limit=50.0, service="APV-I (all subsets)", unit="subsets"
+    )
     assert any(a.get_gid() == "alert-limit-pe" for a in ax.get_children())
+    assert any(a.get_ylabel() == "subsets per bin" for a in ax.figure.axes)  # the colour bar
+    note = next(a for a in ax.get_children() if a.get_gid() == "stanford-note")
+    assert " subsets, AL 50 m" in note.get_text()

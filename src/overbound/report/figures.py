@@ -210,6 +210,7 @@ def plot_stanford(
     alert_limit: float,
     service: str = "",
     ax: Axes | None = None,
+    unit: str = "epochs",
 ) -> Axes:
     """Stanford(-ESA) integrity diagram: 2-D histogram of (PE, PL) with the regions counted.
 
@@ -220,6 +221,8 @@ def plot_stanford(
     alert_limit : the service's alert limit on this axis (m).
     service : service name for the title.
     ax : axes to draw on; a new figure (with a colour bar axes) when ``None``.
+    unit : what the histogram counts, for the labels: ``"epochs"``, or ``"subsets"`` for the
+        all-subsets histogram of :func:`overbound.sbas.subsets.all_subsets`.
 
     Returns
     -------
@@ -301,7 +304,7 @@ def plot_stanford(
                 },
             )
         ax.annotate(
-            f"{total:,} epochs, AL {alert_limit:g} m: {counts.no_solution:,} without solution (not drawn),\n"
+            f"{total:,} {unit}, AL {alert_limit:g} m: {counts.no_solution:,} without solution (not drawn),\n"
             f"{hist.clipped:,} beyond {top:g} m (drawn on the border)",
             xy=(0.5, 0.0),
             xycoords="axes fraction",
@@ -314,7 +317,7 @@ def plot_stanford(
             gid="stanford-note",
         )
         bar = fig.colorbar(image, cax=cax) if cax is not None else fig.colorbar(image, ax=ax)
-        bar.set_label("epochs per bin")
+        bar.set_label(f"{unit} per bin")
         bar.ax.minorticks_off()
         bar.ax.yaxis.set_major_formatter(_count_format())
         bar.ax.tick_params(labelsize=7)
