@@ -38,7 +38,7 @@ from overbound.stats.continuity import (
     pool_curves,
     station_grid,
 )
-from overbound.stats.dependence import RegularSeries, autocorrelation, regular_series
+from overbound.stats.dependence import RegularSeries, autocorrelation, one_over_e_time, regular_series
 from overbound.stats.parametric import (
     RatioFit,
     WeibullFit,
@@ -409,22 +409,16 @@ def _acf(values: np.ndarray, interval_s: float) -> _ACF:
     if not np.isfinite(rho[0]):
         return _ACF(np.arange(rho.size) * step * interval_s, rho, step, math.nan)
     span_s = np.count_nonzero(np.isfinite(sub)) * step * interval_s
-    raw, tau = rho, _one_over_e(rho, step * interval_s)
+    raw, tau = rho, one_over_e_time(rho, step * interval_s)
     for _ in range(MEAN_BIAS_ITERATIONS):
         # mean-removal bias of the sample ACF: E[rho_hat] ~ (rho - e)/(1 - e), e = var(mean)/var = 2 tau/T
         eps = min(2.0 * tau / span_s, 0.5) if math.isfinite(tau) else 0.5
         rho = raw * (1.0 - eps) + eps
-        new = _one_over_e(rho, step * interval_s)
+        new = one_over_e_time(rho, step * interval_s)
         if new == tau:
             break
         tau = new
     return _ACF(np.arange(rho.size) * step * interval_s, rho, step, tau)
-
-
-def _one_over_e(rho: np.ndarray, lag_s: float) -> float:
-    """First lag (s) with the ACF below 1/e; ``inf`` when it never drops there."""
-    below = np.flatnonzero(rho < math.exp(-1.0))  # NaN lags never count
-    return float(below[0] * lag_s) if below.size else math.inf
 
 
 def _thin_acf(a: _ACF, b: _ACF) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -43,6 +43,7 @@ from overbound.stats.dependence import (
     cluster_sizes,
     decluster_runs,
     extremal_index,
+    one_over_e_time,
     regular_series,
     select_spaced,
     vk_curve,
@@ -501,8 +502,7 @@ def _dependence(
     reg = regular_series(t_us, x, interval_s=interval_s)
     m = int(min(round(ACF_MAX_LAG_S / interval_s), reg.values.size - 1))
     acf = autocorrelation(reg.values, max_lag=max(m, 0))
-    below = np.flatnonzero(acf < math.exp(-1.0))
-    decor = float(below[0] * interval_s) if below.size else math.inf
+    decor = one_over_e_time(acf, interval_s)
     te = t_s[x > level]
     span = max(10.0 * (decor if math.isfinite(decor) else ACF_MAX_LAG_S), 60.0 * interval_s)
     k = np.linspace(0.0, span, 121)
@@ -662,7 +662,8 @@ def _tail_fit(
         p_bca = (math.nan, math.nan)
     rates = samples / size_star
     samples_app = per_approach(samples, rates, exposure_n)
-    p_ci = _union(_union(percentile_ci(samples, confidence), p_bca), p_prof)
+    p_ci_boot = percentile_ci(samples, confidence)
+    p_ci = _union(_union(p_ci_boot, p_bca), p_prof)
     app_ci = per_approach(np.array(p_ci), np.array(p_ci) / size.mean, exposure_n)
     msgs_s = "; ".join(msgs)
     return TailFit(
@@ -687,7 +688,7 @@ def _tail_fit(
         p=p,
         p_ci=p_ci,
         p_95=p_ci[1],
-        p_ci_bootstrap=percentile_ci(samples, confidence),
+        p_ci_bootstrap=p_ci_boot,
         p_profile_ci=p_prof,
         p_ci_bca=p_bca,
         cluster_rate=rate,

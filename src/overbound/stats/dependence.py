@@ -34,6 +34,7 @@ __all__ = [
     "extremal_index",
     "extremal_index_runs",
     "nominal_interval_us",
+    "one_over_e_time",
     "prefix_counts",
     "regular_series",
     "select_spaced",
@@ -448,12 +449,23 @@ def decorrelation_time(
     rho = autocorrelation(a, max_lag=m)
     if not np.isfinite(rho[0]):
         return float("nan")
-    below = rho < np.exp(-1.0) if rule == "1/e" else rho <= 0  # NaN lags never count
-    hit = np.flatnonzero(below)
+    if rule == "1/e":
+        return one_over_e_time(rho, interval_s)
+    hit = np.flatnonzero(rho <= 0)  # NaN lags never count
     if rule == "integral":
         k0 = int(hit[0]) if hit.size else rho.size
         return float(interval_s * (1.0 + 2.0 * np.nansum(rho[1:k0])))
     return float(hit[0] * interval_s) if hit.size else float("inf")
+
+
+def one_over_e_time(rho: np.ndarray, lag_s: float) -> float:
+    """First lag (s) at which an autocorrelation ``rho`` (lags 0, 1, ... of ``lag_s``) drops below 1/e.
+
+    ``inf`` when it never does; NaN lags never count. The rule of :func:`decorrelation_time`
+    (``"1/e"``), for an ACF already computed.
+    """
+    below = np.flatnonzero(np.asarray(rho) < np.exp(-1.0))
+    return float(below[0] * lag_s) if below.size else float("inf")
 
 
 @dataclass(frozen=True, slots=True)
