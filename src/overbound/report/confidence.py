@@ -33,7 +33,7 @@ from overbound.methods.confidence_level import (
 )
 from overbound.report.figures import new_figure, style
 from overbound.report.json import dumps
-from overbound.report.page import escape, figure_html, write_page
+from overbound.report.page import escape, figure_html, section_html, write_page
 from overbound.stats.overbounding import SigmaInflation
 
 __all__ = [
@@ -550,7 +550,7 @@ def confidence_section_html(analysis: ConfidenceAnalysis) -> str:
             + "</div>"
         )
     title = f"{'Vertical' if axis == 'vertical' else 'Horizontal'} PL confidence level"
-    return f'<section id="{sid}">\n<h2>{_e(title)}</h2>\n' + "\n".join(parts) + "\n</section>"
+    return section_html(sid, title, parts)
 
 
 def write_confidence_report(

@@ -43,7 +43,16 @@ from overbound.report.evt_figures import (
     plot_vk,
 )
 from overbound.report.figures import style
-from overbound.report.page import badge, escape, figure_html, percent, row_table, scientific, write_page
+from overbound.report.page import (
+    badge,
+    escape,
+    figure_html,
+    percent,
+    row_table,
+    scientific,
+    section_html,
+    write_page,
+)
 from overbound.stats.dependence import VKCurve
 
 __all__ = [
@@ -558,20 +567,21 @@ def evt_section_html(analysis: TailAnalysis, *, series: tuple[np.ndarray, np.nda
         "<h3>Figures</h3>",
         '<div class="figrow">' + "".join(drawn) + "</div>",
     ]
-    if skipped:
-        parts.append(f'<p class="limits">Not drawn: {_e(", ".join(skipped))}.</p>')
-    return f'<section id="{sid}">\n<h2>{_e(title)}</h2>\n' + "\n".join(parts) + "\n</section>"
+    return section_html(sid, title, parts, skipped)
 
 
 def evt_failure_html(axis: str, message: str) -> str:
     """The ``<section id="evt-<axis>">`` of an axis whose EVT analysis could not run: no estimate, and why."""
     title = f"{_AXIS.get(axis, axis)} EVT tail extrapolation"
-    return (
-        f'<section id="evt-{_e(axis)}">\n<h2>{_e(title)}</h2>\n'
-        f'<p class="alarm">No estimate of P<sub>MI</sub>: {_e(message)}</p>\n'
-        "<p>The tail extrapolation needs enough independent values (cluster maxima) in the tail of the "
-        "safety index to choose a threshold and fit it; a longer campaign or a higher sampling rate "
-        "gives more.</p>\n</section>"
+    return section_html(
+        f"evt-{axis}",
+        title,
+        [
+            f'<p class="alarm">No estimate of P<sub>MI</sub>: {_e(message)}</p>',
+            "<p>The tail extrapolation needs enough independent values (cluster maxima) in the tail of the "
+            "safety index to choose a threshold and fit it; a longer campaign or a higher sampling rate "
+            "gives more.</p>",
+        ],
     )
 
 

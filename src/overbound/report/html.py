@@ -44,7 +44,7 @@ from overbound.report.figures import (
     plot_timeseries,
 )
 from overbound.report.json import dumps, summary_dict
-from overbound.report.page import PAGE_CSS, escape, figure_html, scientific
+from overbound.report.page import PAGE_CSS, escape, figure_html, scientific, section_html
 from overbound.report.parametric import parametric_section_html
 from overbound.report.parametric import section_ids as parametric_ids
 from overbound.services import ServiceLevel
@@ -181,7 +181,7 @@ def _num(cell: str) -> _Num:
 
 
 def _section(sid: str, title: str, content: str) -> str:
-    return f'<section id="{_e(sid)}">\n<h2>{_e(title)}</h2>\n{content}\n</section>'
+    return section_html(sid, title, [content])
 
 
 def _table(head: list[str], rows: list[list[str]], *, cls: str = "", caption: str = "") -> str:

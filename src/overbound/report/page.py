@@ -21,6 +21,7 @@ __all__ = [
     "percent",
     "row_table",
     "scientific",
+    "section_html",
     "write_page",
 ]
 
@@ -172,3 +173,12 @@ def write_page(path: str | Path, *, title: str, intro_html: str, body_html: str)
     path = Path(path)
     path.write_bytes(text.encode("utf-8"))
     return path
+
+
+def section_html(sid: str, title: str, parts: Sequence[str], skipped: Sequence[str] = ()) -> str:
+    """A ``<section id=sid>`` with an ``<h2>`` title, the HTML ``parts`` one per line, and a line
+    naming the figures not drawn (``skipped``) when there are any."""
+    body = list(parts)
+    if skipped:
+        body.append(f'<p class="limits">Not drawn: {escape(", ".join(skipped))}.</p>')
+    return f'<section id="{escape(sid)}">\n<h2>{escape(title)}</h2>\n' + "\n".join(body) + "\n</section>"

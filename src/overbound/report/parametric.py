@@ -45,7 +45,16 @@ from overbound.methods.parametric import (
 )
 from overbound.methods.pooling import PE_PL
 from overbound.report.figures import plot_timeseries, style
-from overbound.report.page import badge, escape, figure_html, percent, row_table, scientific, write_page
+from overbound.report.page import (
+    badge,
+    escape,
+    figure_html,
+    percent,
+    row_table,
+    scientific,
+    section_html,
+    write_page,
+)
 from overbound.report.parametric_figures import (
     TINY,
     LocalFit,
@@ -763,17 +772,13 @@ def _axis_section(
         ]
     drawn, skipped = _figures(analysis, a, table, timeseries)
     parts += ["<h3>Figures</h3>", _figure_rows(drawn)]
-    if skipped:
-        parts.append(f'<p class="limits">Not drawn: {_e(", ".join(skipped))}.</p>')
-    return f'<section id="{sid}">\n<h2>{_e(title)}</h2>\n' + "\n".join(parts) + "\n</section>"
+    return section_html(sid, title, parts, skipped)
 
 
 def _failure_section(axis: str, reason: str) -> str:
     title = f"{_AXIS.get(axis, axis)} parametric availability, integrity and continuity"
-    return (
-        f'<section id="parametric-{_e(axis)}">\n<h2>{_e(title)}</h2>\n'
-        f'<p class="alarm">No parametric estimate: {_e(reason)}</p>\n</section>'
-    )
+    alarm = f'<p class="alarm">No parametric estimate: {_e(reason)}</p>'
+    return section_html(f"parametric-{axis}", title, [alarm])
 
 
 def parametric_section_html(
