@@ -197,6 +197,25 @@ def process(
     )  # fmt: skip
 
 
+def _read_role(files, role: str, from_ubx, read_others, from_others, reports: list) -> list:
+    """What the files of one role (``nav``, ``sbas``) give: each u-blox log read alone (``from_ubx`` picks
+    its part), the other files read together by ``read_others`` (``from_others`` picks the part of its
+    result); every read report is appended to ``reports``."""
+    out, others = [], []
+    for name, kind, data in _load(files, role):
+        if kind == "ubx":
+            raw, rep = read_ubx_raw(_stream(data, name))
+            out.append(from_ubx(raw))
+            reports.append((role, rep))
+        else:
+            others.append(_stream(data, name))
+    if others:
+        result, rep = read_others(others)
+        out.append(from_others(result))
+        reports.append((role, rep))
+    return out
+
+
 def read_inputs(
     obs: Source | Sequence[Source],
     nav: Source | Sequence[Source] = (),
@@ -226,31 +245,9 @@ def read_inputs(
             marker = marker or o.header.marker_name.strip()
         reports.append(("obs", rep))
     step("reading ephemerides")
-    rinex_nav = []
-    for name, kind, data in _load(nav, "nav"):
-        if kind == "ubx":
-            raw, rep = read_ubx_raw(_stream(data, name))
-            ephs.append(raw.eph)
-            reports.append(("nav", rep))
-        else:
-            rinex_nav.append(_stream(data, name))
-    if rinex_nav:
-        n, rep = read_rinex_nav(rinex_nav)
-        ephs.append(n.table)
-        reports.append(("nav", rep))
+    ephs += _read_role(nav, "nav", lambda raw: raw.eph, read_rinex_nav, lambda n: n.table, reports)
     step("reading SBAS messages")
-    ems = []
-    for name, kind, data in _load(sbas, "sbas"):
-        if kind == "ubx":
-            raw, rep = read_ubx_raw(_stream(data, name))
-            frames.append(raw.frames)
-            reports.append(("sbas", rep))
-        else:
-            ems.append(_stream(data, name))
-    if ems:
-        f, rep = read_ems(ems)
-        frames.append(f)
-        reports.append(("sbas", rep))
+    frames += _read_role(sbas, "sbas", lambda raw: raw.frames, read_ems, lambda f: f, reports)
     obs_table = pl.concat(tables, how="diagonal_relaxed") if tables else pl.DataFrame()
     if obs_table.height:
         obs_table = obs_table.unique(("time", "sat"), keep="first", maintain_order=True).sort("time", "prn")
