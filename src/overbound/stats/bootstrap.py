@@ -242,11 +242,15 @@ def _score_slope(y: np.ndarray, tau: np.ndarray, ymax: np.ndarray) -> tuple[np.n
     """
     small = np.abs(tau) * ymax < _SMALL
     tt = np.where(small, np.where(tau < 0, -_SMALL, _SMALL) / ymax, tau)
-    w = tt[:, None] * y
-    r = y / (1.0 + w)
-    xi = np.mean(np.log1p(w), axis=1)
+    # the same operations as y/(1+w), log1p(w), r*r, written into two buffers (no temporaries: the
+    # chunk is 64 x 1e4 doubles and this is the bootstrap's hot loop)
+    w = np.multiply(tt[:, None], y)
+    buf = np.log1p(w)
+    xi = np.mean(buf, axis=1)
+    np.add(w, 1.0, out=w)
+    r = np.divide(y, w, out=w)
     q = np.mean(r, axis=1)
-    q2 = np.mean(r * r, axis=1)
+    q2 = np.mean(np.multiply(r, r, out=buf), axis=1)
     g = 1.0 / tt - q * (1.0 + xi) / xi
     dg = -1.0 / (tt * tt) + q2 * (1.0 + xi) / xi + (q / xi) ** 2
     if np.any(small):
@@ -266,7 +270,8 @@ def _newton_rows(y: np.ndarray, tau0: float) -> tuple[np.ndarray, np.ndarray]:
         ia = np.flatnonzero(active)
         if ia.size == 0:
             break
-        g, dg = _score_slope(y[ia], tau[ia], ymax[ia])
+        # all rows active (the first steps): the rows themselves, not a gathered copy of the chunk
+        g, dg = _score_slope(y if ia.size == b else y[ia], tau[ia], ymax[ia])
         ok = dg < 0.0  # concave there: a Newton step moves towards the maximum
         step = np.where(ok, -g / np.where(ok, dg, -1.0), 0.0)
         new = tau[ia] + step
