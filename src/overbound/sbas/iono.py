@@ -197,14 +197,23 @@ def select_and_interpolate(
         clat[g], clon[g], x[g], y[g], sel[g] = la[good], lo[good], xx[good], yy[good], m[good]
 
     idx = np.flatnonzero(todo_all)
-    for want in (4, 3):  # (a), (b): the first cell
-        rest = idx[~found[idx]]
-        take(rest, first[0][rest], first[1][rest], first[2], first[3][rest], want)
+    # (a), (b): the first cell, tried for every pierce point at once (most end here with four IGPs)
+    la = first[0][idx, None] + _CORNERS[:, 1] * first[2]
+    lo = _wrap(first[1][idx, None] + _CORNERS[:, 0] * first[3][idx, None])
+    m = in_mask(idx, la, lo)
+    xx = _wrap(lon[idx] - first[1][idx]) / first[3][idx]
+    yy = (lat[idx] - first[0][idx]) / first[2]
+    good = m.all(axis=1)
+    three = ~good & (m.sum(axis=1) == 3)
+    good[three] = _triangle_ok(m[three], xx[three], yy[three])[2]
+    found[idx], clat[idx], clon[idx], x[idx], y[idx], sel[idx] = good, la, lo, xx, yy, m
     cands = _candidates(lat, lon)
     for want in (4, 3):  # (c), (d): the 10x10 cells
         for la0, lo0, dlat, dlon in cands:
             rest = idx[~found[idx]]
             take(rest, la0[rest], lo0[rest], dlat, np.full(rest.size, dlon), want)
+    lost = ~found  # what the first cell left behind is no selection
+    sel[lost], clat[lost], clon[lost] = False, 0.0, 0.0
 
     fail = np.where(todo_all, FAIL_NO_CELL, FAIL_POLAR)
     ok = np.zeros(n, bool)
@@ -217,15 +226,21 @@ def select_and_interpolate(
         bad = s & ~usable
         n_sel, n_bad = s.sum(axis=1), bad.sum(axis=1)
         four = (n_sel == 4) & (n_bad == 0)
-        tri_set = np.where((n_sel == 4)[:, None] & (n_bad == 1)[:, None], s & ~bad, s)
-        missing, w3, inside = _triangle_ok(tri_set, x[f], y[f])
-        three = ((n_sel == 3) & (n_bad == 0)) | ((n_sel == 4) & (n_bad == 1) & inside)
         dont = (s & dnu).any(axis=1)
+        xf, yf = x[f], y[f]
+        w = np.stack([xf * yf, (1 - xf) * yf, (1 - xf) * (1 - yf), xf * (1 - yf)], axis=-1)
+        m_f = np.where(four, 0, -1)
+        # triangles only where one is asked for: three selected, or four with one unusable
+        tri = np.flatnonzero(((n_sel == 3) & (n_bad == 0)) | ((n_sel == 4) & (n_bad == 1)))
+        missing, w3, inside = _triangle_ok((s & ~bad)[tri], xf[tri], yf[tri])
+        three = np.zeros(f.size, bool)
+        three[tri] = (n_sel[tri] == 3) | inside
         good = (four | three) & ~dont
-        w4 = np.stack([x[f] * y[f], (1 - x[f]) * y[f], (1 - x[f]) * (1 - y[f]), x[f] * (1 - y[f])], axis=-1)
+        w[tri] = w3
+        m_f[tri] = np.where(three[tri], missing + 1, -1)
         ok[f] = good
-        weights[f] = np.where((four & good)[:, None], w4, np.where((three & good)[:, None], w3, 0.0))
-        mode[f] = np.where(four & good, 0, np.where(three & good, missing + 1, -1))
-        outside = (n_sel == 4) & (n_bad == 1) & ~inside
+        weights[f] = np.where(good[:, None], w, 0.0)
+        mode[f] = np.where(good, m_f, -1)
+        outside = (n_sel == 4) & (n_bad == 1) & ~three
         fail[f] = np.select([good, dont, outside], [0, FAIL_DONT_USE, FAIL_OUTSIDE], FAIL_UNUSABLE)
     return GridSelection(ok, clat, clon, weights, mode, fail)
