@@ -28,7 +28,8 @@ The 24 hourly files of a day (73,335 messages) read in about 0.1 s.
 A line that does not fit the layout is rejected and counted with its file and line number; a
 file in which no line fits is not an EMS file and raises :class:`~overbound.io.schema.InputError`.
 The newer EMS layout with fractional seconds and a frequency band (L5 / DFMC) is recognised and
-refused with a clear message. RINEX-B files are recognised and refused too (no reader yet).
+refused with a clear message. A RINEX-B file given here is refused with a pointer to
+:func:`overbound.io.rinex_b.read_rinex_b`.
 """
 
 from __future__ import annotations
@@ -282,7 +283,7 @@ def _refuse_files_without_ems(names: tuple[str, ...], lines: _Lines, reason: np.
         line = int(lines.lineno[i])
         if b"RINEX VERSION / TYPE" in bytes(lines.mat[mine[:5]].ravel()):
             raise InputError(
-                names[f], "a RINEX file, not EMS; RINEX-B SBAS files are not read yet", line=line
+                names[f], "a RINEX file, not EMS (RINEX-B: overbound.io.rinex_b.read_rinex_b)", line=line
             )
         if len(head) > 21 and head[21] == "." and head[:3].isdigit():
             raise InputError(

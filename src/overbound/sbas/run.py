@@ -1,10 +1,10 @@
 """Files in, epoch table out: the ``overbound sbas`` pipeline around :func:`~overbound.sbas.engine.run_sbas`.
 
 :func:`process` reads the observation, navigation and SBAS message files (each recognised by its
-content: RINEX 2/3 observations, plain, gzip or Hatanaka; RINEX 2/3 GPS navigation; EMS; u-blox
-UBX raw logs, binary or hex-wrapped, which may carry all three), checks that they fit together
-(ephemerides and messages over the observation span), chooses the reference position and the
-GEO, runs the engine and gathers every count of what was rejected on the way.
+content: RINEX 2/3 observations, plain, gzip or Hatanaka; RINEX 2/3 GPS navigation; EMS or RINEX-B
+SBAS messages; u-blox UBX raw logs, binary or hex-wrapped, which may carry all three), checks that
+they fit together (ephemerides and messages over the observation span), chooses the reference
+position and the GEO, runs the engine and gathers every count of what was rejected on the way.
 :func:`write_run` writes the epoch table (:func:`overbound.io.table.write_epochs`, so ``overbound
 analyze`` reads it) and the per-satellite table next to it (``NAME.sats.parquet``).
 
@@ -46,6 +46,7 @@ from overbound.io._rinex import US, load_bytes
 from overbound.io.ems import read_ems
 from overbound.io.geodesy import Reference
 from overbound.io.open import Source, source_name
+from overbound.io.rinex_b import read_rinex_b
 from overbound.io.rinex_nav import (
     SPEED_OF_LIGHT,
     broadcast_state,
@@ -69,19 +70,20 @@ _EMS_LINE = re.compile(rb"^\s*\d{3} \d\d \d\d \d\d \d\d \d\d \d\d [ \d]?\d [0-9A
 _KINDS = {
     "obs": ("rinex-obs", "ubx"),
     "nav": ("rinex-nav", "ubx"),
-    "sbas": ("ems", "ubx"),
+    "sbas": ("ems", "rinex-b", "ubx"),
 }
 _KIND_TEXT = {
     "rinex-obs": "a RINEX observation file",
     "rinex-nav": "a RINEX navigation file",
     "ems": "an EMS SBAS message file",
+    "rinex-b": "a RINEX-B SBAS message file",
     "ubx": "a u-blox UBX log",
 }
 _OPTION = {"obs": "--obs", "nav": "--nav", "sbas": "--sbas"}
 _ACCEPTS = {
     "obs": "RINEX 2/3 observations (plain, gzip, Hatanaka) or a u-blox UBX raw log",
     "nav": "RINEX 2/3 GPS navigation or a u-blox UBX raw log",
-    "sbas": "EMS SBAS message files or a u-blox UBX raw log",
+    "sbas": "EMS or RINEX-B SBAS message files or a u-blox UBX raw log",
 }
 Progress = Callable[[str], None]
 
@@ -110,6 +112,8 @@ class SbasRun:
     options: SbasOptions
     reports: tuple[tuple[str, ReadReport], ...]
     counts: dict[str, object] = field(default_factory=dict)
+    #: The broadcast ephemerides the engine used (range-domain products need their TGD); None if not kept.
+    eph: pl.DataFrame | None = None
 
     def metadata(self) -> dict:
         """JSON-ready provenance: inputs, rejections, options, reference, engine counts."""
@@ -148,7 +152,7 @@ def process(
     ----------
     obs : observation files (RINEX 2/3, gzip, Hatanaka) or u-blox UBX raw logs.
     nav : GPS navigation files; may be empty when a UBX log in ``obs`` carries ephemerides.
-    sbas : EMS files; may be empty when a UBX log in ``obs`` carries SBAS frames.
+    sbas : EMS or RINEX-B files; may be empty when a UBX log in ``obs`` carries SBAS frames.
     reference : a :class:`Reference`, an ECEF triple, ``"mean"`` (see the module notes) or None
         (the RINEX header position).
     station : name for the ``station`` column (default: the RINEX marker name or the file stem).
@@ -194,23 +198,25 @@ def process(
     return SbasRun(
         epochs=result.epochs, satellites=result.satellites, reference_ecef=tuple(float(v) for v in ref),
         reference_source=source, station=inp.station, options=opt, reports=inp.reports, counts=counts,
+        eph=inp.eph,
     )  # fmt: skip
 
 
-def _read_role(files, role: str, from_ubx, read_others, from_others, reports: list) -> list:
+def _read_role(files, role: str, from_ubx, readers: dict, from_others, reports: list) -> list:
     """What the files of one role (``nav``, ``sbas``) give: each u-blox log read alone (``from_ubx`` picks
-    its part), the other files read together by ``read_others`` (``from_others`` picks the part of its
-    result); every read report is appended to ``reports``."""
-    out, others = [], []
+    its part), the other files of one kind read together by ``readers[kind]`` (kinds in order of first
+    appearance; ``from_others`` picks the part of its result); every read report is appended to
+    ``reports``."""
+    out, others = [], {}
     for name, kind, data in _load(files, role):
         if kind == "ubx":
             raw, rep = read_ubx_raw(_stream(data, name))
             out.append(from_ubx(raw))
             reports.append((role, rep))
         else:
-            others.append(_stream(data, name))
-    if others:
-        result, rep = read_others(others)
+            others.setdefault(kind, []).append(_stream(data, name))
+    for kind, streams in others.items():
+        result, rep = readers[kind](streams)
         out.append(from_others(result))
         reports.append((role, rep))
     return out
@@ -245,9 +251,11 @@ def read_inputs(
             marker = marker or o.header.marker_name.strip()
         reports.append(("obs", rep))
     step("reading ephemerides")
-    ephs += _read_role(nav, "nav", lambda raw: raw.eph, read_rinex_nav, lambda n: n.table, reports)
+    nav_readers = {"rinex-nav": read_rinex_nav}
+    ephs += _read_role(nav, "nav", lambda raw: raw.eph, nav_readers, lambda n: n.table, reports)
     step("reading SBAS messages")
-    frames += _read_role(sbas, "sbas", lambda raw: raw.frames, read_ems, lambda f: f, reports)
+    sbas_readers = {"ems": read_ems, "rinex-b": read_rinex_b}
+    frames += _read_role(sbas, "sbas", lambda raw: raw.frames, sbas_readers, lambda f: f, reports)
     obs_table = pl.concat(tables, how="diagonal_relaxed") if tables else pl.DataFrame()
     if obs_table.height:
         obs_table = obs_table.unique(("time", "sat"), keep="first", maintain_order=True).sort("time", "prn")
@@ -330,9 +338,8 @@ def _kind(data: bytes, role: str) -> str:
         return "ubx"
     first = data[:200].split(b"\n", 1)[0].rstrip(b"\r")
     if first[60:].strip() == b"RINEX VERSION / TYPE":
-        return {b"O": "rinex-obs", b"N": "rinex-nav", b"G": "rinex-nav", b"H": "rinex-nav"}.get(
-            first[20:21], "rinex-other"
-        )
+        kinds = {b"O": "rinex-obs", b"N": "rinex-nav", b"G": "rinex-nav", b"H": "rinex-nav", b"B": "rinex-b"}
+        return kinds.get(first[20:21], "rinex-other")
     if not data.strip():
         return "ems" if role == "sbas" else "empty"  # an hour without messages is an empty EMS file
     line = data.lstrip().split(b"\n", 1)[0]
@@ -375,7 +382,7 @@ def _check(inp: SbasInputs) -> dict:
     if len(fr) == 0 or not fr.crc_ok.any():
         raise InputError(
             src, "no SBAS messages" + (" with a valid CRC" if len(fr) else "")
-            + ": give --sbas with EMS files (or a u-blox log with SBAS RXM-SFRB(X) frames)",
+            + ": give --sbas with EMS or RINEX-B files (or a u-blox log with SBAS RXM-SFRB(X) frames)",
         )  # fmt: skip
     t_msg = fr.time[fr.crc_ok]
     if t_msg.min() > t_obs.max() or t_msg.max() < t_obs.min():
