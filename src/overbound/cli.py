@@ -811,7 +811,8 @@ _FILES = click.Path(dir_okay=False, path_type=Path)
     multiple=True,
     type=_FILES,
     metavar="FILE...",
-    help="SBAS messages: EMS files (default: the SBAS frames of a UBX log in --obs).",
+    help="SBAS messages: EMS files or RINEX-B (2.10/2.11 GEO SBAS broadcast) files, plain or gzip, "
+    "recognised by content (default: the SBAS frames of a UBX log in --obs).",
 )
 @click.option(
     "--reference",
@@ -844,6 +845,31 @@ _FILES = click.Path(dir_okay=False, path_type=Path)
 )
 @click.option("--station", help="Station name (default: RINEX marker name or file name).")
 @click.option(
+    "--all-subsets",
+    "all_subsets",
+    is_flag=True,
+    help="Also write the Stanford-ESA all-subsets histogram (every subset of 4 or more used satellites "
+    "per epoch): NAME.subsets.json and NAME.subsets.png.",
+)
+@click.option(
+    "--service",
+    "services",
+    multiple=True,
+    metavar="NAME|NAME:HAL:VAL",
+    help="Service level of the --all-subsets counts (repeatable); default: LPV with --mode PA, NPA with "
+    "--mode NPA.",
+)
+@click.option(
+    "--sp3",
+    "sp3",
+    cls=_ManyOption,
+    multiple=True,
+    type=_FILES,
+    metavar="FILE...",
+    help="SP3 precise orbits and clocks over the observations: also write the range-domain errors "
+    "normalised by their sigmas (GIMAT 3.4), NAME.range.parquet.",
+)
+@click.option(
     "-o",
     "--output",
     "out",
@@ -851,22 +877,59 @@ _FILES = click.Path(dir_okay=False, path_type=Path)
     type=_FILES,
     help="Epoch table (.parquet or .csv); the per-satellite table goes next to it (NAME.sats.parquet).",
 )
-def sbas(obs, nav, sbas_files, reference, reference_ecef, mode, mask_deg, geo, station, out) -> None:
+def sbas(
+    obs,
+    nav,
+    sbas_files,
+    reference,
+    reference_ecef,
+    mode,
+    mask_deg,
+    geo,
+    station,
+    all_subsets,
+    services,
+    sp3,
+    out,
+) -> None:
     """DO-229 SBAS engine: errors and protection levels from raw observations and SBAS messages."""
     from overbound.sbas.engine import SbasOptions
+    from overbound.sbas.products import range_product, subsets_product, write_range, write_subsets
     from overbound.sbas.run import process, write_run
+    from overbound.services import resolve_services
 
+    if services and not all_subsets:
+        raise click.UsageError("--service sets the --all-subsets counts: give --all-subsets too")
+    levels = resolve_services(list(services)) if services else None  # a bad name fails before the engine
     ref = _sbas_reference(reference, reference_ecef)
     options = SbasOptions(mode=mode, mask_deg=mask_deg, geo=geo)
     with _progress() as bar:
         task = bar.add_task("reading", total=None)
+
+        def step(what: str) -> None:
+            bar.update(task, description=what)
+
         run = process(list(obs), list(nav), list(sbas_files), reference=ref, station=station, options=options,
-                      progress=lambda what: bar.update(task, description=what))  # fmt: skip
-        bar.update(task, description=f"writing {out}")
+                      progress=step)  # fmt: skip
+        # products before any writing: a bad SP3 file leaves no half-written output
+        subsets = subsets_product(run, levels, progress=step) if all_subsets else None
+        ranges = range_product(run, list(sp3), progress=step) if sp3 else None
+        step(f"writing {out}")
         epochs_path, sats_path = write_run(run, out)
+        subsets_paths = write_subsets(subsets, run, out) if subsets else None
+        range_path = write_range(ranges, run, out) if ranges else None
     console.print(_sbas_line(run, epochs_path), highlight=False, soft_wrap=True)
+    if subsets_paths:
+        console.print(_subsets_line(subsets, subsets_paths[0]), highlight=False, soft_wrap=True)
+    if range_path:
+        console.print(_range_line(ranges, range_path), highlight=False, soft_wrap=True)
     click.echo(f"epochs: {epochs_path}")
     click.echo(f"satellites: {sats_path}")
+    if subsets_paths:
+        click.echo(f"subsets: {subsets_paths[0]}")
+        click.echo(f"subsets figure: {subsets_paths[1]}")
+    if range_path:
+        click.echo(f"range: {range_path}")
 
 
 def _sbas_line(run, path: Path) -> str:
@@ -891,6 +954,44 @@ def _sbas_line(run, path: Path) -> str:
         f"HPE95 {pct(sol['hpe'], 95)} m, |VPE|95 {pct(sol['vpe'], 95)} m "
         f"(reference: {run.reference_source}); messages {msgs['messages']}, bad CRC {c['bad_crc']}; "
         f"rejected lines/records: {rejected}; observations without ephemeris: {miss}"
+        + (f" (PRN {', '.join(map(str, prns))})" if prns else "")
+    )
+
+
+def _subsets_line(product, path: Path) -> str:
+    """One line: subsets and epochs, singular subsets, region counts per service, worst PE/PL."""
+    first = product.results[product.services[0].name]
+    parts = []
+    for s in product.services:
+        c = product.results[s.name].counts
+        axes = [a for a in ("horizontal", "vertical") if s.alert_limit(a) is not None]
+        parts.append(
+            f"{s.name} " + "; ".join(
+                f"{a[0].upper()}PL>=AL {c[a].unavailable + c[a].unavailable_mi}, MI {c[a].mi}, HMI {c[a].hmi}"
+                for a in axes
+            )
+        )  # fmt: skip
+    w = first.worst_ratio
+    return (
+        f"{path}: {first.n_subsets} subsets of {first.n_epochs} epochs "
+        f"({first.n_singular} singular left out); "
+        + ", ".join(parts)
+        + f"; worst PE/PL H {_fmt(w['horizontal'])}, V {_fmt(w['vertical'])}"
+    )
+
+
+def _range_line(product, path: Path) -> str:
+    """One line: ranges compared, normalised-error spread, ranges without SP3 data."""
+    import numpy as np
+
+    c = product.counts
+    x = np.abs(product.table["normalised"].to_numpy())
+    prns = c["prns_without_sp3"]
+    return (
+        f"{path}: {c['rows']} ranges of {c['satellites']} satellites over {c['epochs']} epochs against SP3 "
+        f"({', '.join(Path(f).name for f in product.sp3_files)}); "
+        f"|error/sigma| 95 % {_fmt(np.percentile(x, 95))}, "
+        f"max {_fmt(x.max())}; used ranges without SP3 data: {c['rows_without_sp3']}"
         + (f" (PRN {', '.join(map(str, prns))})" if prns else "")
     )
 
