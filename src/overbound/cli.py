@@ -955,7 +955,9 @@ def _sbas_line(run, path: Path) -> str:
         f"(reference: {run.reference_source}); messages {msgs['messages']}, bad CRC {c['bad_crc']}; "
         f"rejected lines/records: {rejected}; observations without ephemeris: {miss}"
         + (f" (PRN {', '.join(map(str, prns))})" if prns else "")
-    )
+        + (f"; duplicate observation records dropped: {c['duplicate_observation_rows']}"
+           if c.get("duplicate_observation_rows") else "")
+    )  # fmt: skip
 
 
 def _subsets_line(product, path: Path) -> str:
@@ -993,7 +995,9 @@ def _range_line(product, path: Path) -> str:
         f"|error/sigma| 95 % {_fmt(np.percentile(x, 95))}, "
         f"max {_fmt(x.max())}; used ranges without SP3 data: {c['rows_without_sp3']}"
         + (f" (PRN {', '.join(map(str, prns))})" if prns else "")
-    )
+        + (f"; duplicate observation records dropped: {c['duplicate_observation_rows']}"
+           if c.get("duplicate_observation_rows") else "")
+    )  # fmt: skip
 
 
 @main.command()

@@ -41,6 +41,19 @@ def test_process_is_run_sbas_on_the_files():
     assert set(run.epochs["geo"].to_list()) == {123}
 
 
+def test_duplicate_observations_are_dropped_and_counted(tmp_path):
+    """The same file given twice (or overlapping files): the first record is kept, the rest counted."""
+    once = process(OBS, NAV, EMS)
+    twice = process([OBS, OBS], NAV, EMS)
+    assert twice.epochs.equals(once.epochs)
+    assert twice.satellites.equals(once.satellites)
+    assert once.counts["duplicate_observation_rows"] == 0
+    assert twice.counts["duplicate_observation_rows"] == once.counts["observation_rows"]
+    res = _cli(tmp_path, "--obs", OBS, "--obs", OBS, "--nav", NAV, "--sbas", *EMS)
+    assert res.exit_code == 0, res.output
+    assert f"duplicate observation records dropped: {once.counts['observation_rows']}" in res.output
+
+
 def _cli(tmp_path, *args):
     return CliRunner().invoke(main, ["sbas", *map(str, args), "-o", str(tmp_path / "e.parquet")])
 

@@ -98,6 +98,7 @@ class SbasInputs:
     header_position: tuple[float, float, float] | None
     station: str
     reports: tuple[tuple[str, ReadReport], ...]  # (role, report)
+    duplicate_observations: int = 0  # records of a (time, satellite) already read, dropped
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -245,7 +246,8 @@ def read_inputs(
             if not sbas:
                 frames.append(raw.frames)
         else:
-            o, rep = read_rinex_obs(_stream(data, name), codes=("C1C", "L1C", "S1C"))
+            # the engine uses the L1 C/A code only (no SNR mask, no carrier smoothing: plain DO-229)
+            o, rep = read_rinex_obs(_stream(data, name), codes=("C1C",))
             tables.append(o.table.select(c for c in o.table.columns if not c.endswith(("_lli", "_ssi"))))
             header_pos = header_pos or o.header.approx_position
             marker = marker or o.header.marker_name.strip()
@@ -256,9 +258,7 @@ def read_inputs(
     step("reading SBAS messages")
     sbas_readers = {"ems": read_ems, "rinex-b": read_rinex_b}
     frames += _read_role(sbas, "sbas", lambda raw: raw.frames, sbas_readers, lambda f: f, reports)
-    obs_table = pl.concat(tables, how="diagonal_relaxed") if tables else pl.DataFrame()
-    if obs_table.height:
-        obs_table = obs_table.unique(("time", "sat"), keep="first", maintain_order=True).sort("time", "prn")
+    obs_table, n_dup = _merge_observations(tables)
     eph = pl.concat(ephs, how="diagonal_relaxed") if ephs else pl.DataFrame()
     if eph.height:
         eph = eph.unique(("prn", "toc", "iode", "iodc"), keep="first", maintain_order=True)
@@ -266,7 +266,26 @@ def read_inputs(
     return SbasInputs(
         obs=obs_table, eph=eph, frames=SbasFrames.concat(frames), header_position=header_pos,
         station=station or marker or Path(first).name.split(".")[0], reports=tuple(reports),
+        duplicate_observations=n_dup,
     )  # fmt: skip
+
+
+def _merge_observations(tables: list[pl.DataFrame]) -> tuple[pl.DataFrame, int]:
+    """The observation tables as one, in (time, system, PRN) order, and how many duplicate records
+    (same time and satellite, e.g. overlapping files) were dropped, the first one read being kept."""
+    table = pl.concat(tables, how="diagonal_relaxed") if tables else pl.DataFrame()
+    if not table.height:
+        return table, 0
+    t = table["time"].dt.epoch("us").to_numpy()
+    system = table["system"].cast(pl.String).cast(pl.Categorical).to_physical().to_numpy()
+    code = system.astype(np.int64) * 1024 + table["prn"].to_numpy().astype(np.int64)
+    order = np.lexsort((code, t))  # stable: among duplicates the first read comes first
+    t, code = t[order], code[order]
+    dup = np.zeros(order.size, bool)
+    dup[1:] = (t[1:] == t[:-1]) & (code[1:] == code[:-1])
+    if (order[1:] > order[:-1]).all() and not dup.any():
+        return table, 0  # already in order (one file): no copy
+    return table[order[~dup]], int(dup.sum())
 
 
 def satellites_path(path: str | Path) -> Path:
@@ -294,7 +313,9 @@ def write_run(run: SbasRun, path: str | Path) -> tuple[Path, Path]:
     if path.suffix.lower() == ".csv":
         run.satellites.write_csv(sats)
     else:
-        run.satellites.write_parquet(sats, compression="zstd")
+        # zstd level 1: 5 % larger than the default level 3 and a third faster to write (0.32 s against
+        # 0.47 s for a day at 1 Hz, 849,360 rows, 85 MB), which is a tenth of the whole command
+        run.satellites.write_parquet(sats, compression="zstd", compression_level=1)
     return path, sats
 
 
@@ -400,6 +421,7 @@ def _check(inp: SbasInputs) -> dict:
         "missing_ephemeris_rows": missing.height,
         "missing_ephemeris_prns": sorted(set(missing["prn"].to_list())),
         "observation_rows": gps.height,
+        "duplicate_observation_rows": inp.duplicate_observations,
         "observation_epochs": int(np.unique(t_obs).size),
     }
 
