@@ -10,6 +10,7 @@ from __future__ import annotations
 import datetime as dt
 import functools
 import gzip
+import io
 from pathlib import Path
 
 import numpy as np
@@ -24,6 +25,7 @@ from overbound.io.schema import REQUIRED
 from overbound.sbas import iono, tropo
 from overbound.sbas.corrections import earliest_within, previous_other_value
 from overbound.sbas.engine import (
+    IONO_MODE_KLOBUCHAR,
     REASONS,
     SbasOptions,
     _covariance_delta,
@@ -31,6 +33,7 @@ from overbound.sbas.engine import (
     _service_sets,
     run_sbas,
 )
+from overbound.sbas.klobuchar import geomagnetic_latitude
 from overbound.sbas.messages import AI, DELTA_UDRE, FC_TIMEOUT_PA, decode
 from overbound.sbas.solution import weighted_least_squares
 
@@ -326,10 +329,11 @@ def _evening_inputs():
     return obs, decode(read_ems([FIX / "ems_1930-2210.ems.gz"])[0])
 
 
-def _run(msgs, mode: str):
+def _run(msgs, mode: str, klobuchar=None):
     obs, _ = _evening_inputs()
     opt = SbasOptions(mode=mode, relativity="rv")
-    return run_sbas(obs.table, _nav().table, msgs, obs.header.approx_position, options=opt)
+    ref = obs.header.approx_position
+    return run_sbas(obs.table, _nav().table, msgs, ref, options=opt, klobuchar=klobuchar)
 
 
 def test_npa_matches_glab_npa_where_do229_defines_it():
@@ -361,6 +365,106 @@ def test_npa_matches_glab_npa_where_do229_defines_it():
     assert e.height > 0.9 * out.height and (e["mode"] == "NPA").all()
     assert float((e["hpl"] - e["hpl_glab"]).abs().max()) < 0.001
     assert float((e["vpl"] - e["vpl_glab"]).abs().max()) < 0.001
+
+
+# --- NPA Klobuchar fall-back (DO-229D J.2.3) ---------------------------------------------------------------
+def _coefficients():
+    return _nav().header.ion_alpha, _nav().header.ion_beta
+
+
+@functools.cache
+def _npa_with_and_without_klobuchar():
+    _, msgs = _evening_inputs()
+    return _run(msgs, "NPA"), _run(msgs, "NPA", klobuchar=_coefficients())
+
+
+def _glab_klobuchar_rows() -> pl.DataFrame:
+    """(sod, prn) of gLAB's NPA rows on its Klobuchar model (SBASCORR field 51 = 1) and its delay."""
+    lines = gzip.decompress((FIX / "glab_synt_1930-2210_npa_klobuchar.out.gz").read_bytes()).decode()
+    rows = [r.split() for r in lines.splitlines()]
+    return pl.DataFrame([(float(r[3]), int(r[6]), float(r[24])) for r in rows],
+                        schema=["sod", "prn", "iono_glab"], orient="row")  # fmt: skip
+
+
+def test_npa_klobuchar_fallback_uses_exactly_the_rows_glab_does():
+    before, after = _npa_with_and_without_klobuchar()
+    assert before.counts["klobuchar"] == "no coefficients"
+    b, a = (_sod(r.satellites).with_columns(pl.col("prn").cast(pl.Int64)) for r in (before, after))
+    gained = a["used"] & ~b["used"]
+    new = a.filter(gained)
+    assert after.counts["klobuchar"] == new.height > 0 and not (b["used"] & ~a["used"]).any()
+    assert (new["iono_mode"] == IONO_MODE_KLOBUCHAR).all()
+    assert set(b.filter(gained)["reason"]) == {"no_iono", "iono_outside_triangle"}
+    # rows off the broadcast model are untouched (their residuals too, in epochs without a new row)
+    off = a["iono_mode"] != IONO_MODE_KLOBUCHAR
+    assert a.filter(off).drop("residual").equals(b.filter(off).drop("residual"))
+    same_epoch = ~a["sod"].is_in(new["sod"].implode())
+    assert a.filter(off & same_epoch).equals(b.filter(off & same_epoch))
+    # gLAB's Klobuchar rows: the ones gained, plus those it keeps with its MOPS-C 60 m sigma_flt
+    g = _glab_klobuchar_rows()
+    assert new.join(g, on=("sod", "prn"), how="anti").height == 0
+    rest = g.join(new, on=("sod", "prn"), how="anti").join(a, on=("sod", "prn"))
+    assert rest.height == g.height - new.height
+    assert set(rest["reason"]) <= {"no_mt7", "no_long_term", "no_ephemeris_iode"}
+    # what gLAB's NPA still uses and this engine does not: only its MOPS-C fall-back
+    _, var, _ = _read_glab(FIX / "glab_synt_1930-2210_npa.out.gz")
+    j = a.join(var.select("sod", "prn").with_columns(glab=True), on=("sod", "prn"), how="left")
+    assert j.filter("used" & pl.col("glab").is_null()).height == 0
+    extra = j.filter(pl.col("glab") & ~pl.col("used"))
+    assert set(extra["reason"]) <= GLAB_ONLY_NPA - {"no_iono", "iono_outside_triangle"}
+
+
+def test_npa_klobuchar_sigmas_and_levels_against_glab():
+    _, after = _npa_with_and_without_klobuchar()
+    obs, _ = _evening_inputs()
+    lat, lon, _ = pymap3d.ecef2geodetic(*obs.header.approx_position, deg=False)
+    out, var, _ = _read_glab(FIX / "glab_synt_1930-2210_npa.out.gz")
+    a = _sod(after.satellites).with_columns(pl.col("prn").cast(pl.Int64))
+    k = a.filter("used", pl.col("iono_mode") == IONO_MODE_KLOBUCHAR)
+    j = k.join(var, on=("sod", "prn"), suffix="_glab").join(_glab_klobuchar_rows(), on=("sod", "prn"))
+    assert j.height == k.height > 0
+    # IS-GPS-200's delay against gLAB's variant of it (tests/sbas/test_klobuchar.py): within 12 cm
+    assert float((j["iono"] - j["iono_glab"]).abs().max()) < 0.15
+    # tau_vert changes at 55 deg geomagnetic latitude, where gLAB's exact latitude and IS-GPS-200's
+    # approximation can disagree: one row here (6 m against 4.5 m); elsewhere the sigmas agree
+    mag = np.rad2deg(geomagnetic_latitude(lat, lon, np.deg2rad(j["elevation"]), np.deg2rad(j["azimuth"])))
+    edge = np.abs(np.abs(mag) - 55.0) < 0.1
+    assert edge.sum() == 1 and j.filter(edge)["sigma_uire"][0] > j.filter(edge)["sigma_uire_glab"][0]
+    ok = j.filter(~edge)
+    assert float((ok["sigma_uire"] - ok["sigma_uire_glab"]).abs().max()) < 0.001
+    assert float((ok["sigma"] - ok["sigma_glab"]).abs().max()) < 0.005
+    # epochs with gLAB's satellites, away from that row: the same HPL (K_H = 6.18)
+    used = a.filter("used").group_by("sod").len()
+    full = var.group_by("sod").len().join(used, on="sod", suffix="_ours")
+    full = full.filter(pl.col("len") == pl.col("len_ours"))
+    e = _sod(after.epochs).join(out, on="sod", suffix="_glab").join(full, on="sod")
+    e = e.filter(~pl.col("sod").is_in(j.filter(edge)["sod"].implode()))
+    assert e["sod"].is_in(k["sod"].implode()).sum() > 10  # epochs that hold a Klobuchar row
+    assert float((e["hpl"] - e["hpl_glab"]).abs().max()) < 0.001
+
+
+def test_npa_klobuchar_after_the_igp_mask_times_out():
+    _, msgs = _evening_inputs()
+    cut = _without(msgs, ("igp_mask",), "19:45:00", "20:30:00")  # MT 18 time-out: 1200 s
+    late = pl.col("time").is_between(pl.datetime(2019, 1, 14, 20, 10), pl.datetime(2019, 1, 14, 20, 25))
+    none = _run(cut, "NPA").satellites.filter(late)
+    klob = _run(cut, "NPA", klobuchar=_coefficients()).satellites.filter(late)
+    assert (none["reason"] == "iono_mask_timeout").sum() > 20
+    timed_out = none["reason"] == "iono_mask_timeout"
+    assert klob.filter(timed_out)["used"].all()
+    assert (klob.filter(timed_out)["iono_mode"] == IONO_MODE_KLOBUCHAR).all()
+
+
+def test_pa_never_uses_the_broadcast_model():
+    _, msgs = _evening_inputs()
+    plain, given = _run(msgs, "PA"), _run(msgs, "PA", klobuchar=_coefficients())
+    for x, y in ((plain.epochs, given.epochs), (plain.satellites, given.satellites)):
+        bx, by = io.BytesIO(), io.BytesIO()
+        x.write_ipc(bx)
+        y.write_ipc(by)
+        assert bx.getvalue() == by.getvalue()
+    assert "klobuchar" not in given.counts and given.counts == plain.counts
+    assert (given.satellites["reason"] == "iono_outside_triangle").sum() > 0
 
 
 def _without(msgs, tables: tuple[str, ...], first: str, last: str):

@@ -69,12 +69,20 @@ NPA mode (``mode="NPA"``) differs from PA as DO-229D prescribes:
 * eps_er = C_er (MT 10) once the fast, the long-term or the MT 28 correction is older than its PA
   time-out but not its NPA one (A.4.5.1.4).
 
-gLAB's NPA goes further than DO-229D, and this engine does not follow it: where the grid fails it
-uses the Klobuchar model (DO-229D allows the GPS broadcast model in NPA, with sigma_UIRE of J.2.3,
-but the RINEX navigation reader does not keep the ION ALPHA/BETA coefficients yet), and without
-fast or long-term correction it uses the satellite with the MOPS-C sigma_flt of 60 m and any
-broadcast IODE. On the evening Toulouse window those are the only rows gLAB uses and this engine
-does not (3 % of them); elsewhere the sigmas and PLs agree (tests/sbas/test_engine.py).
+Where the grid gives no correction (``iono_mask_timeout``, ``no_igp_cell``,
+``iono_outside_triangle``, ``no_iono``), NPA uses the GPS broadcast (Klobuchar) model of
+IS-GPS-200 20.3.3.5.2.5 with sigma_UIRE^2 = max((T_iono / 5)^2, (F_pp tau_vert)^2) of DO-229D
+J.2.3 (:mod:`overbound.sbas.klobuchar`; ``iono_mode`` :data:`IONO_MODE_KLOBUCHAR`), given the
+navigation header's coefficients (``klobuchar=``; without them those rows keep their reason and
+``counts["klobuchar"]`` is ``"no coefficients"``, else the number of rows used with it). PA never
+does: it needs the grid.
+
+gLAB's NPA differs in two ways. Its Klobuchar delay is a variant of IS-GPS-200's (spherical
+pierce point, exact geomagnetic latitude, obliquity and cosine: up to 12 cm apart on the evening
+Toulouse window; the sigmas agree except where the two geomagnetic latitudes fall on either side
+of 55 deg). And without fast or long-term correction it uses the satellite with the MOPS-C sigma_flt
+of 60 m and any broadcast IODE, which DO-229D does not have and this engine does not do. Elsewhere
+the sigmas and PLs agree (tests/sbas/test_engine.py).
 
 Not handled yet: GEO ranging, pierce points poleward of 75 deg, the previous-mask (old IODP/IODI)
 fall-backs (MT 28 of the previous IODP included, which gLAB uses).
@@ -82,6 +90,7 @@ fall-backs (MT 28 of the previous IODP included, which gLAB uses).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -99,11 +108,12 @@ from overbound.sbas.corrections import (
     segments,
     times_us,
 )
+from overbound.sbas.klobuchar import geomagnetic_latitude, klobuchar_delay, klobuchar_sigma2
 from overbound.sbas.messages import FC_TIMEOUT_NPA, FC_TIMEOUT_PA, SbasMessages
 from overbound.sbas.solution import K_H_NPA, K_H_PA, K_V_PA, weighted_least_squares
 from overbound.sbas.tropo import mops_tropo
 
-__all__ = ["REASONS", "SbasOptions", "SbasResult", "run_sbas"]
+__all__ = ["IONO_MODE_KLOBUCHAR", "REASONS", "SbasOptions", "SbasResult", "run_sbas"]
 
 C = SPEED_OF_LIGHT
 
@@ -124,6 +134,14 @@ TIMEOUT_NPA = {1: 600, 6: 18, 7: 360, 10: 360, 18: 1200, 25: 360, 26: 600, 27: 8
 #: only two broadcast corners; the four corners of a square are (lat1, lon1), (lat2, lon2), (lat1, lon2),
 #: (lat2, lon1), and this engine reads the triangle as the first three of them, as gLAB does.
 TRIANGLE_THIRD_CORNER = "lat1_lon2"
+#: ``iono_mode`` of a row whose ionosphere is the GPS broadcast model (NPA fall-back, DO-229D J.2.3); the
+#: grid's codes are those of :class:`overbound.sbas.iono.GridSelection` (0 four points, 1-4 triangle,
+#: -1 none).
+IONO_MODE_KLOBUCHAR = 5
+#: GPS broadcast ionospheric coefficients (alpha, beta), four each (IS-GPS-200 20.3.3.5.2.5).
+Coefficients = tuple[Sequence[float], Sequence[float]]
+#: Unix time (s) of the GPS epoch, 1980-01-06 00:00:00, for the GPS time of week.
+_GPS_EPOCH_UNIX = 315_964_800
 #: sigma_flt offset (m) when MT 10 is not held (DO-229D A.4.5.1: (sigma_UDRE delta_UDRE + 8 m)^2; NPA).
 SIGMA_FLT_NO_MT10 = 8.0
 
@@ -178,11 +196,15 @@ def run_sbas(
     *,
     station: str = "",
     options: SbasOptions | None = None,
+    klobuchar: Coefficients | None = None,
 ) -> SbasResult:
     """Process every epoch of ``obs`` (RINEX table with ``time``, ``system``, ``prn``, ``C1C``).
 
     ``eph`` is :attr:`overbound.io.rinex_nav.GpsEphemerides.table`; the linearisation point,
     elevation and pierce points use ``reference_ecef`` (the errors are against it too).
+    ``klobuchar``: the GPS broadcast ionospheric coefficients (alpha, beta) of the navigation
+    header (:class:`overbound.io.rinex_nav.NavHeader`), used in NPA where the grid gives no
+    correction (DO-229D J.2.3); None: no fall-back, and ``counts["klobuchar"]`` says so.
     """
     opt = options or SbasOptions()
     obs = obs.filter(pl.col("system") == "G").sort("time", "prn")
@@ -232,10 +254,12 @@ def run_sbas(
                                                             deg["ccovariance"]), du["value"])  # fmt: skip
     flag(geom["elev"] < np.deg2rad(opt.mask_deg), "elevation")
     grid = _iono(ctx, m, geom, lat, lon, deg)
-    flag(grid["mask_timeout"], "iono_mask_timeout")
-    flag(grid["fail"] == ionomod.FAIL_NO_CELL, "no_igp_cell")
-    flag(grid["fail"] == ionomod.FAIL_OUTSIDE, "iono_outside_triangle")
-    flag(~grid["ok"], "no_iono")
+    broadcast = _klobuchar_fallback(ctx, geom, grid, lat, lon, klobuchar) if not pa else None
+    keep = np.ones(t.size, bool) if broadcast is None else ~broadcast  # rows the fall-back saves
+    flag(grid["mask_timeout"] & keep, "iono_mask_timeout")
+    flag((grid["fail"] == ionomod.FAIL_NO_CELL) & keep, "no_igp_cell")
+    flag((grid["fail"] == ionomod.FAIL_OUTSIDE) & keep, "iono_outside_triangle")
+    flag(~grid["ok"] & keep, "no_iono")
     doy = _day_of_year(t)
     tropo, sig_tropo = mops_tropo(lat, h, doy, geom["elev"])
 
@@ -320,6 +344,9 @@ def run_sbas(
     counts = {"epochs": int(epochs_us.size), "rows": int(t.size),
               "reasons": {REASONS[i]: int(n_by[i]) for i in sorted(np.flatnonzero(n_by).tolist(),
                                                                     key=REASONS.__getitem__)}}  # fmt: skip
+    if not pa:
+        n_klob = "no coefficients" if broadcast is None else int((broadcast & (reason == 0)).sum())
+        counts["klobuchar"] = n_klob
     return SbasResult(epochs=epochs, satellites=sats, counts=counts)
 
 
@@ -863,6 +890,30 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
     return {"ok": ok, "mode": mode, "fail": fail, "slant": slant, "sigma2_uire": s2uire, "fpp": fpp,
             "mask_timeout": mask_to,
             "ipp_lat": np.rad2deg(lat_pp), "ipp_lon": np.rad2deg(lon_pp)}  # fmt: skip
+
+
+def _klobuchar_fallback(
+    ctx: _Context, geom: dict, grid: dict, lat: float, lon: float, coefficients: Coefficients | None
+) -> np.ndarray | None:
+    """NPA: the GPS broadcast model where the grid gives no correction (DO-229D J.2.3), in ``grid``.
+
+    The rows whose grid failed or whose IGP mask timed out, above the horizon, get the slant delay
+    of IS-GPS-200 20.3.3.5.2.5, sigma_UIRE^2 = max((T_iono / 5)^2, (F_pp tau_vert)^2) and
+    ``iono_mode`` :data:`IONO_MODE_KLOBUCHAR`; returns those rows, or None without coefficients.
+    """
+    if coefficients is None:
+        return None
+    alpha, beta = coefficients
+    rows = (grid["mask_timeout"] | ~grid["ok"]) & (geom["elev"] > 0)
+    i = np.flatnonzero(rows)
+    lat_r, lon_r = np.deg2rad(lat), np.deg2rad(lon)
+    el, az = geom["elev"][i], geom["azim"][i]
+    sow = np.mod(ctx.t[i] // US - _GPS_EPOCH_UNIX, 7 * 86_400).astype(float) + (ctx.t[i] % US) / US
+    delay = klobuchar_delay(alpha, beta, lat_r, lon_r, el, az, sow)
+    grid["slant"][i] = delay
+    grid["sigma2_uire"][i] = klobuchar_sigma2(delay, el, geomagnetic_latitude(lat_r, lon_r, el, az))
+    grid["mode"][i] = IONO_MODE_KLOBUCHAR
+    return rows
 
 
 #: Number of :func:`_grid_key` values (latitudes -90..90 by 5 deg, 72 longitudes).

@@ -89,7 +89,9 @@ class GridSelection(NamedTuple):
 
     ok : a correction is available. clat, clon : (n, 4) coordinates of the selected cell's corners
     (NE, NW, SW, SE). weights : (n, 4), 0 for a corner not used. mode : 0 four points, 1..4 the
-    corner left out of a triangle (gLAB's code), -1 none. fail : why not (``FAIL_*``, 0 if ok).
+    corner left out of a triangle (gLAB's code), -1 none; the engine's ``iono_mode`` column is this
+    code, or 5 (:data:`overbound.sbas.engine.IONO_MODE_KLOBUCHAR`) where NPA fell back on the GPS
+    broadcast model. fail : why not (``FAIL_*``, 0 if ok).
     """
 
     ok: np.ndarray

@@ -49,6 +49,7 @@ from overbound.io.open import Source, source_name
 from overbound.io.rinex_b import read_rinex_b
 from overbound.io.rinex_nav import (
     SPEED_OF_LIGHT,
+    GpsEphemerides,
     broadcast_state,
     read_rinex_nav,
     rotate_earth,
@@ -99,6 +100,8 @@ class SbasInputs:
     station: str
     reports: tuple[tuple[str, ReadReport], ...]  # (role, report)
     duplicate_observations: int = 0  # records of a (time, satellite) already read, dropped
+    #: GPS broadcast ionospheric coefficients (alpha, beta) of the first RINEX navigation file's header.
+    klobuchar: tuple[tuple[float, ...], tuple[float, ...]] | None = None
 
 
 @dataclass(frozen=True, slots=True, eq=False)
@@ -254,7 +257,10 @@ def read_inputs(
         reports.append(("obs", rep))
     step("reading ephemerides")
     nav_readers = {"rinex-nav": read_rinex_nav}
-    ephs += _read_role(nav, "nav", lambda raw: raw.eph, nav_readers, lambda n: n.table, reports)
+    navs = _read_role(nav, "nav", lambda raw: raw.eph, nav_readers, lambda n: n, reports)
+    headers = [n.header for n in navs if isinstance(n, GpsEphemerides)]
+    ephs += [n.table if isinstance(n, GpsEphemerides) else n for n in navs]
+    klob = next(((h.ion_alpha, h.ion_beta) for h in headers if h.ion_alpha and h.ion_beta), None)
     step("reading SBAS messages")
     sbas_readers = {"ems": read_ems, "rinex-b": read_rinex_b}
     frames += _read_role(sbas, "sbas", lambda raw: raw.frames, sbas_readers, lambda f: f, reports)
@@ -266,7 +272,7 @@ def read_inputs(
     return SbasInputs(
         obs=obs_table, eph=eph, frames=SbasFrames.concat(frames), header_position=header_pos,
         station=station or marker or Path(first).name.split(".")[0], reports=tuple(reports),
-        duplicate_observations=n_dup,
+        duplicate_observations=n_dup, klobuchar=klob,
     )  # fmt: skip
 
 
@@ -492,7 +498,7 @@ def _run(inp: SbasInputs, msgs, ref, opt: SbasOptions, schedule: pl.DataFrame) -
         o = SbasOptions(
             mode=opt.mode, mask_deg=opt.mask_deg, geo=int(g), flight_time=opt.flight_time, aad=opt.aad
         )
-        r = run_sbas(obs, inp.eph, msgs, ref, station=inp.station, options=o)
+        r = run_sbas(obs, inp.eph, msgs, ref, station=inp.station, options=o, klobuchar=inp.klobuchar)
         geo_col = pl.lit(g, pl.Int16).alias("geo")
         parts.append((r.epochs.with_columns(geo_col), r.satellites.with_columns(geo_col), r.counts))
     if len(parts) == 1:
@@ -501,12 +507,16 @@ def _run(inp: SbasInputs, msgs, ref, opt: SbasOptions, schedule: pl.DataFrame) -
     reasons: Counter = Counter()
     for _, _, c in parts:
         reasons.update(c["reasons"])
+    counts = {"epochs": sum(p[2]["epochs"] for p in parts), "rows": sum(p[2]["rows"] for p in parts),
+              "reasons": dict(sorted(reasons.items()))}  # fmt: skip
+    if "klobuchar" in parts[0][2]:  # NPA: rows on the broadcast model, or why none
+        klob = [p[2]["klobuchar"] for p in parts]
+        counts["klobuchar"] = sum(klob) if all(isinstance(k, int) for k in klob) else klob[0]
     return SbasResult(
         epochs=pl.concat([p[0] for p in parts]).sort("time"),
         satellites=pl.concat([p[1] for p in parts]).sort("time", "prn"),
-        counts={"epochs": sum(p[2]["epochs"] for p in parts), "rows": sum(p[2]["rows"] for p in parts),
-                "reasons": dict(sorted(reasons.items()))},
-    )  # fmt: skip
+        counts=counts,
+    )
 
 
 def _shift(ref, epochs: pl.DataFrame) -> tuple[float, float, float]:

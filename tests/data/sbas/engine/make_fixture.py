@@ -17,7 +17,9 @@ Run from the repository root::
    ionospheric triangle rejections at Toulouse (19:46-19:54) and the IODE change-over of 22:03
    for which the daily navigation file has no new ephemerides.
 5. ``glab_synt_1930-2210_npa.out.gz``: gLAB's processing of the evening Toulouse window in NPA mode
-   (``-model:sbasmode NPA``, otherwise the same options).
+   (``-model:sbasmode NPA``, otherwise the same options); ``glab_synt_1930-2210_npa_klobuchar.out.gz``:
+   the ``SBASCORR`` lines of the same run (``-print:sbascorr`` added) whose ionosphere is gLAB's
+   Klobuchar model (field 51 = 1).
 All gzip files are written without name or time stamp, so they do not depend on the run.
 """
 
@@ -53,8 +55,10 @@ def cut_obs(text: str, first: str = " 19  1 14  2  0  0", last: str = " 19  1 14
     return text[:end] + text[start:stop]
 
 
-def run_glab(glab: str, obs_name: str, obs: str, ems: bytes, mode: str = "PA") -> bytes:
-    """gLAB's output for ``obs`` with ``ems`` and the day's navigation file, the KEEP lines only."""
+def run_glab(glab: str, obs_name: str, obs: str, ems: bytes, mode: str = "PA", extra: tuple[str, ...] = (),
+             keep: tuple[str, ...] = KEEP) -> bytes:  # fmt: skip
+    """gLAB's output for ``obs`` with ``ems`` and the day's navigation file (``extra`` options added), the
+    ``keep`` lines only."""
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
         (work / obs_name).write_text(obs)
@@ -62,10 +66,10 @@ def run_glab(glab: str, obs_name: str, obs: str, ems: bytes, mode: str = "PA") -
         (work / "brdc0140.19n").write_bytes((DATA / "brdc0140.19n").read_bytes())
         inputs = ["-input:obs", obs_name, "-input:nav", "brdc0140.19n", "-input:sbas1f", "egnos123.ems"]
         options = [mode if o == "PA" else o for o in GLAB_OPTIONS]
-        cmd = [glab, *inputs, *options, "-output:file", "full.out"]
+        cmd = [glab, *inputs, *options, *extra, "-output:file", "full.out"]
         subprocess.run(cmd, cwd=work, check=True, stdout=subprocess.DEVNULL)
         lines = (work / "full.out").read_text().splitlines(keepends=True)
-    kept = [ln for ln in lines if ln.split(None, 1)[0].rstrip("*") in KEEP and "built on" not in ln]
+    kept = [ln for ln in lines if ln.split(None, 1)[0].rstrip("*") in keep and "built on" not in ln]
     return "".join(kept).encode()
 
 
@@ -88,6 +92,10 @@ def evening(glab: str) -> None:
         if station == "SYNT":
             out = run_glab(glab, f"{station}0140.19o", obs, ems, mode="NPA")
             write_gz(OUT / "glab_synt_1930-2210_npa.out.gz", out)
+            corr = run_glab(glab, f"{station}0140.19o", obs, ems, mode="NPA", extra=("-print:sbascorr",),
+                            keep=("SBASCORR",))  # fmt: skip
+            klob = [ln for ln in corr.decode().splitlines(keepends=True) if ln.split()[50] == "1"]
+            write_gz(OUT / "glab_synt_1930-2210_npa_klobuchar.out.gz", "".join(klob).encode())
 
 
 def main(glab: str) -> None:
