@@ -130,9 +130,13 @@ REASONS = (
 #: Message time-outs (s) for PA and NPA (DO-229D Table A-25), by message type.
 TIMEOUT_PA = {1: 600, 6: 12, 7: 240, 10: 240, 18: 1200, 25: 240, 26: 600, 27: 86400, 28: 240}
 TIMEOUT_NPA = {1: 600, 6: 18, 7: 360, 10: 360, 18: 1200, 25: 360, 26: 600, 27: 86400, 28: 360}
-#: Third corner of an MT 27 triangle: "lat1_lon2" (gLAB) or "lat2_lon1" (MAAST). DO-229D A.4.4.13 names
-#: only two broadcast corners; the four corners of a square are (lat1, lon1), (lat2, lon2), (lat1, lon2),
-#: (lat2, lon1), and this engine reads the triangle as the first three of them, as gLAB does.
+#: Third corner of an MT 27 triangle: "lat1_lon2" or "lat2_lon1". MT 27 broadcasts two corners per
+#: region (DO-229D A.4.4.13, Table A-16); the four corners of a square are (lat1, lon1), (lat2, lon2),
+#: (lat1, lon2), (lat2, lon1), and a triangle is the first three. gLAB v6 reads it so; the ICAO SARPs'
+#: note to the service message (Annex 10 Vol. I App. B 3.5.4.9, coordinate 3 = coordinate 1 latitude,
+#: coordinate 2 longitude; quoted from memory, the text was not at hand) agrees; MAAST takes
+#: (lat2, lon1). EGNOS does not broadcast MT 27, so no data here exercise the choice;
+#: tests/sbas/test_engine.py pins it.
 TRIANGLE_THIRD_CORNER = "lat1_lon2"
 #: ``iono_mode`` of a row whose ionosphere is the GPS broadcast model (NPA fall-back, DO-229D J.2.3); the
 #: grid's codes are those of :class:`overbound.sbas.iono.GridSelection` (0 four points, 1-4 triangle,
@@ -847,27 +851,32 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
     known = pos_b < bands.size
     known[known] = bands[pos_b[known]] == g_band[known]
     g_band_row = np.where(known, pos_b, bands.size)
+    # per grid value, with a last "no value" row that index -1 (no MT 26 yet) picks: a gather per
+    # look-up, no fill pass (the no-value row is never current: IODI -1 against the band's -2)
+    tag_g = np.append(tg, 0)
+    iodi_g = np.append(g["iodi"].to_numpy().astype(np.int64), -1)
+    band_row_g = np.append(g_band_row, bands.size)
+    give_g = np.append(np.isfinite(g["sigma2_give"].to_numpy()), False)
+    dnu_g = np.append(g["givd_dnu"].to_numpy().astype(bool), False)
     found_r: dict[str, np.ndarray] = {}
 
     def status(rows: np.ndarray, clat: np.ndarray, clon: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        tq = np.repeat(t_av[idx[rows]][:, None], 4, axis=1)
-        r = asof(gkey, tg, _grid_key(clat, clon).ravel(), tq.ravel(), ctx.base).reshape(clat.shape)
+        tq = t_av[idx[rows]][:, None]
+        r = asof(gkey, tg, _grid_key(clat, clon).ravel(), np.repeat(tq, 4), ctx.base).reshape(clat.shape)
         found_r["rows"], found_r["r"] = rows, r  # kept for the interpolation below
-        age = (tq + flight_us - _take(tg, r, fill=0)) / US - ctx.opt.flight_time
-        band_iodi = iodi_ep[_take(g_band_row, r, fill=bands.size), ep[idx[rows]][:, None]]
-        current = (r >= 0) & (_take(g["iodi"].to_numpy(), r, fill=-1) == band_iodi)
-        usable = current & (age <= ctx.timeout(26)) & np.isfinite(_take(g["sigma2_give"].to_numpy(), r))
-        return usable, current & _take(g["givd_dnu"].to_numpy(), r, fill=False).astype(bool)
+        age = (tq + flight_us - tag_g[r]) / US - ctx.opt.flight_time
+        current = iodi_g[r] == iodi_ep[band_row_g[r], ep[idx[rows]][:, None]]
+        return current & (age <= ctx.timeout(26)) & give_g[r], current & dnu_g[r]
 
     sel = ionomod.select_and_interpolate(np.rad2deg(lat_pp[idx]), np.rad2deg(lon_pp[idx]), in_mask, status)
     ok_sub, w, mode_sub = sel.ok, sel.weights, sel.mode
     # only pierce points with a cell can have a correction (ok_sub False elsewhere): the grid values
     # are those of status()'s look-up
     f, r = found_r.get("rows", np.zeros(0, np.int64)), found_r.get("r", np.zeros((0, 4), np.int64))
-    tq = np.repeat(t_av[idx[f]][:, None], 4, axis=1)
-    givd = np.nan_to_num(_take(g["givd"].to_numpy(), r))
-    s2give = np.nan_to_num(_take(g["sigma2_give"].to_numpy(), r))
-    t_iono = (tq + flight_us - _take(tg, r, fill=0)) / US + 1.0  # t - (tag - 1)
+    tq = t_av[idx[f]][:, None]
+    givd = np.nan_to_num(np.append(g["givd"].to_numpy(), np.nan))[r]
+    s2give = np.nan_to_num(np.append(g["sigma2_give"].to_numpy(), np.nan))[r]
+    t_iono = (tq + flight_us - tag_g[r]) / US + 1.0  # t - (tag - 1)
     d = {k2: deg[k2][idx[f]][:, None] for k2 in ("ciono_step", "iiono", "ciono_ramp", "rss_iono")}
     eps = d["ciono_step"] * np.floor(_ratio(t_iono, d["iiono"])) + d["ciono_ramp"] * t_iono
     s2grid = np.where(d["rss_iono"] > 0, s2give + eps**2, (np.sqrt(s2give) + eps) ** 2)
