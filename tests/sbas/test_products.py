@@ -114,7 +114,9 @@ def test_histogram_cells_sum_to_the_non_singular_subsets():
 
 def test_npa_mode_defaults_to_the_npa_service_without_vertical():
     run = process(OBS, NAV, EMS, options=SbasOptions(mode="NPA"))
-    doc = subsets_dict(subsets_product(run, max_size=5), run)
+    product = subsets_product(run, max_size=5)
+    assert product.results["NPA"].vertical is None and set(product.results["NPA"].counts) == {"horizontal"}
+    doc = subsets_dict(product, run)
     assert list(doc["services"]) == ["NPA"] and doc["services"]["NPA"]["vertical"] is None
     direct = all_subsets(run.satellites, mode="NPA", horizontal_al=556.0, vertical_al=556.0, max_size=5)
     assert doc["services"]["NPA"]["horizontal"]["counts"] == direct.counts["horizontal"].to_dict()

@@ -15,16 +15,23 @@ import pytest
 from overbound.io.ems import read_ems
 from overbound.io.rinex_nav import read_rinex_nav
 from overbound.io.rinex_obs import read_rinex_obs
-from overbound.methods.counting import stanford_counts, stanford_histogram
+from overbound.methods.counting import plot_max, stanford_counts, stanford_histogram
 from overbound.sbas.engine import run_sbas
 from overbound.sbas.messages import decode
 from overbound.sbas.solution import K_H_PA, K_V_PA
-from overbound.sbas.subsets import all_subsets, subset_count, subset_masks, subset_solutions
+from overbound.sbas.subsets import (
+    all_subsets,
+    all_subsets_by_service,
+    subset_count,
+    subset_masks,
+    subset_solutions,
+)
 
 matplotlib.use("Agg")
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "sbas"
 FIX = DATA / "engine"
+_AXES = ("horizontal", "vertical")
 
 
 @functools.cache
@@ -95,6 +102,34 @@ def test_against_brute_force_loop():
     assert res.worst_ratio["vertical"] == pytest.approx((ours["vpe"].abs() / ours["vpl"]).max(), rel=1e-12)
 
 
+def test_one_pass_serves_several_alert_limits_exactly():
+    sats = _some_epochs(10)
+    limits = {"LPV-200": (40.0, 35.0), "APV-II": (40.0, 20.0), "NPA": (556.0, None)}
+    multi = all_subsets_by_service(sats, limits, max_size=6)
+    assert list(multi) == list(limits)
+    sol = subset_solutions(sats, max_size=6).filter(pl.col("hpl").is_not_nan())
+    for name, (hal, val) in limits.items():
+        one, got = all_subsets(sats, horizontal_al=hal, vertical_al=val, max_size=6), multi[name]
+        assert got.alert_limits == one.alert_limits == {"horizontal": hal, "vertical": val}
+        assert got.counts == one.counts and set(got.counts) == ({"horizontal"} if val is None else set(_AXES))
+        for f in ("n_epochs", "n_subsets", "n_singular", "by_size", "worst_ratio"):
+            assert getattr(got, f) == getattr(one, f), f
+        for axis, al in zip(_AXES, (hal, val), strict=True):
+            h, ref = getattr(got, axis), getattr(one, axis)
+            if al is None:
+                assert h is None and ref is None
+                continue
+            np.testing.assert_array_equal(h.counts, ref.counts)
+            np.testing.assert_array_equal(h.edges, ref.edges)
+            assert h.clipped == ref.clipped
+            # and each service's histogram and counts are the counting module's on its own range
+            pe, pl_ = sol[axis[0] + "pe"].to_numpy(), sol[axis[0] + "pl"].to_numpy()
+            direct = stanford_histogram(pe, pl_, axis=axis, max_value=plot_max(al))
+            np.testing.assert_array_equal(h.counts, direct.counts)
+            assert h.clipped == direct.clipped and got.counts[axis] == stanford_counts(np.abs(pe), pl_, al)
+    assert multi["NPA"].horizontal.edges[-1] == plot_max(556.0) > multi["APV-II"].horizontal.edges[-1]
+
+
 def test_singular_subsets_are_counted_and_left_out():
     # satellites 1 and 2 share a line of sight: the 3 four-satellite subsets holding both are singular
     el, az = [30.0, 30.0, 30.0, 60.0, 80.0], [0.0, 0.0, 120.0, 240.0, 45.0]
@@ -123,6 +158,12 @@ def test_bad_input_and_drawing():
         all_subsets(sats, min_size=3)
     with pytest.raises(ValueError, match="mode"):
         all_subsets(sats, mode="CAT")
+    with pytest.raises(ValueError, match="no alert limits"):
+        all_subsets_by_service(sats, {})
+    with pytest.raises(ValueError, match="positive"):
+        all_subsets(sats, horizontal_al=0.0)
+    with pytest.raises(ValueError, match="not a"):
+        all_subsets_by_service(sats, {"LPV": 40.0})  # type: ignore[dict-item]
     from overbound.report.figures import plot_stanford
 
     res = all_subsets(sats, max_size=6)

@@ -18,10 +18,10 @@ input stops the command before anything is written, then written (:func:`write_s
 :func:`write_range`). Outputs are deterministic: sorted JSON keys, no time stamps, PNG without date
 or software metadata.
 
-Alert limits: the histograms of :func:`~overbound.sbas.subsets.all_subsets` span ``plot_max(AL)``,
-so each distinct (HAL, VAL) pair among the services is one pass over all subsets (services with
-the same limits, e.g. LPV and APV-I, share it). A service without a VAL (NPA) has no vertical
-counts, histogram or diagram.
+Alert limits: all services come from one pass over all subsets
+(:func:`~overbound.sbas.subsets.all_subsets_by_service`); only the region counts and the histogram
+range ``plot_max(AL)`` differ between them, and services with the same limits (e.g. LPV and APV-I)
+share one result. A service without a VAL (NPA) has no vertical counts, histogram or diagram.
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ from overbound.io.table import METADATA_KEY
 from overbound.methods.counting import StanfordHistogram
 from overbound.sbas.range_domain import range_errors
 from overbound.sbas.run import SbasRun
-from overbound.sbas.subsets import SubsetHistograms, all_subsets
+from overbound.sbas.subsets import SubsetHistograms, all_subsets_by_service
 from overbound.services import SERVICES, ServiceLevel, resolve_services
 
 __all__ = [
@@ -105,21 +105,15 @@ def subsets_product(
     run : the output of :func:`overbound.sbas.run.process`.
     services : names (``LPV``), ``NAME:HAL:VAL`` strings or levels; default :func:`default_services`.
     bins, max_size : as :func:`overbound.sbas.subsets.all_subsets`.
-    progress : called with a short description before each pass.
+    progress : called with a short description before the (single) pass over the subsets.
     """
     step = progress or (lambda _: None)
     levels = _levels(run.options.mode, services)
-    passes: dict[tuple[float, float | None], SubsetHistograms] = {}
-    results = {}
-    for s in levels:
-        key = (s.hal, s.val)
-        if key not in passes:
-            step(f"all-subsets histogram ({s.name}, pass {len(passes) + 1})")
-            passes[key] = all_subsets(
-                run.satellites, mode=run.options.mode, horizontal_al=s.hal,
-                vertical_al=s.hal if s.val is None else s.val, bins=bins, max_size=max_size,
-            )  # fmt: skip
-        results[s.name] = passes[key]
+    step(f"all-subsets histogram ({', '.join(s.name for s in levels)})")
+    results = all_subsets_by_service(
+        run.satellites, {s.name: (s.hal, s.val) for s in levels}, mode=run.options.mode, bins=bins,
+        max_size=max_size,
+    )  # fmt: skip
     return SubsetsProduct(levels, results, run.options.mode, bins, max_size)
 
 
