@@ -46,6 +46,7 @@ from overbound.io.rinex_nav import SPEED_OF_LIGHT, read_rinex_nav, rotate_earth,
 from overbound.io.rinex_obs import read_rinex_obs
 from overbound.io.sp3 import interpolate_clock, interpolate_position, read_sp3
 from overbound.sbas.engine import run_sbas
+from overbound.sbas.klobuchar import klobuchar_delay
 from overbound.sbas.messages import decode
 from overbound.sbas.run import process
 
@@ -70,22 +71,6 @@ GLAB_OPTIONS = (
     "-print:none",
     "-print:sbasout",
 )
-
-
-def klobuchar(alpha, beta, lat, lon, elev, azim, t_sow) -> np.ndarray:
-    """L1 ionospheric delay (m) of the broadcast model, IS-GPS-200 20.3.3.5.2.5 (angles in semicircles)."""
-    e = elev / np.pi
-    psi = 0.0137 / (e + 0.11) - 0.022
-    phi_i = np.clip(lat / np.pi + psi * np.cos(azim), -0.416, 0.416)
-    lam_i = lon / np.pi + psi * np.sin(azim) / np.cos(phi_i * np.pi)
-    phi_m = phi_i + 0.064 * np.cos((lam_i - 1.617) * np.pi)
-    t = np.mod(4.32e4 * lam_i + t_sow, 86_400.0)
-    f = 1.0 + 16.0 * (0.53 - e) ** 3
-    amp = np.maximum(sum(a * phi_m**k for k, a in enumerate(alpha)), 0.0)
-    per = np.maximum(sum(b * phi_m**k for k, b in enumerate(beta)), 72_000.0)
-    x = 2 * np.pi * (t - 50_400.0) / per
-    delay = np.where(np.abs(x) < 1.57, f * (5e-9 + amp * (1 - x**2 / 2 + x**4 / 24)), f * 5e-9)
-    return SPEED_OF_LIGHT * delay
 
 
 def simulate(step_s: int = 1) -> pl.DataFrame:
@@ -125,7 +110,7 @@ def simulate(step_s: int = 1) -> pl.DataFrame:
         e, n, _ = pymap3d.ecef2enu(rot[..., 0], rot[..., 1], rot[..., 2], lat, lon, h)
         elev, azim = np.arcsin(np.clip(sin_e, -1, 1)), np.arctan2(e, n)
         trop = 2.3 * np.exp(-0.116e-3 * h) * 1.001 / np.sqrt(0.002001 + sin_e**2)
-        iono = klobuchar(
+        iono = klobuchar_delay(
             nav.header.ion_alpha,
             nav.header.ion_beta,
             np.radians(lat),
