@@ -893,6 +893,7 @@ def sbas(
     out,
 ) -> None:
     """DO-229 SBAS engine: errors and protection levels from raw observations and SBAS messages."""
+    from overbound._allocator import keep_freed_memory
     from overbound.sbas.engine import SbasOptions
     from overbound.sbas.run import process, write_run
     from overbound.services import resolve_services
@@ -902,6 +903,7 @@ def sbas(
     if services and not all_subsets:
         raise click.UsageError("--service sets the --all-subsets counts: give --all-subsets too")
     levels = resolve_services(list(services)) if services else None  # a bad name fails before the engine
+    keep_freed_memory()  # the engine's column arrays: reuse freed memory instead of faulting in fresh pages
     ref = _sbas_reference(reference, reference_ecef)
     options = SbasOptions(mode=mode, mask_deg=mask_deg, geo=geo)
     with _progress() as bar:
