@@ -930,10 +930,14 @@ _N_GRID_KEYS = 37 * 72
 
 
 def _grid_key(lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
-    """One integer per 5-degree IGP position."""
-    i = np.round((np.asarray(lat, float) + 90) / 5).astype(np.int64)
-    j = np.round((np.asarray(lon, float) + 180) / 5).astype(np.int64) % 72
-    return i * 72 + j
+    """One integer per 5-degree IGP position (latitude in [-90, 90], longitude in [-180, 180]).
+
+    IGP coordinates are whole multiples of 5 deg, so the divisions are exact and the conversion
+    needs no rounding.
+    """
+    i = ((np.asarray(lat, float) + 90) / 5).astype(np.int64)
+    j = ((np.asarray(lon, float) + 180) / 5).astype(np.int64)
+    return i * 72 + np.where(j >= 72, j - 72, j)
 
 
 def _mask_code(band: np.ndarray | int, iodi: np.ndarray, key: np.ndarray) -> np.ndarray:

@@ -59,7 +59,8 @@ def obliquity(elev_rad: np.ndarray) -> np.ndarray:
 
 
 def _wrap(lon: np.ndarray) -> np.ndarray:
-    return (lon + 180) % 360 - 180
+    """IGP longitudes (multiples of 5 deg in [-190, 190)) into [-180, 180), exactly, by a select."""
+    return np.where(lon >= 180, lon - 360, np.where(lon < -180, lon + 360, lon))
 
 
 def _triangle_weights(x: np.ndarray, y: np.ndarray, missing: np.ndarray) -> np.ndarray:
@@ -187,7 +188,7 @@ def select_and_interpolate(
         la = la0[:, None] + _CORNERS[:, 1] * dlat
         lo = _wrap(lo0[:, None] + _CORNERS[:, 0] * dlon[:, None])
         m = in_mask(idx, la, lo)
-        xx = (_wrap(lon[idx] - lo0)) / dlon
+        xx = (lon[idx] - lo0) / dlon  # lo0 <= lon < lo0 + 15 (lo0 not wrapped): no wrap
         yy = (lat[idx] - la0) / dlat
         if want == 4:
             good = m.all(axis=1)
@@ -203,7 +204,7 @@ def select_and_interpolate(
     la = first[0][idx, None] + _CORNERS[:, 1] * first[2]
     lo = _wrap(first[1][idx, None] + _CORNERS[:, 0] * first[3][idx, None])
     m = in_mask(idx, la, lo)
-    xx = _wrap(lon[idx] - first[1][idx]) / first[3][idx]
+    xx = (lon[idx] - first[1][idx]) / first[3][idx]
     yy = (lat[idx] - first[0][idx]) / first[2]
     good = m.all(axis=1)
     three = ~good & (m.sum(axis=1) == 3)
