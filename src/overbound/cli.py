@@ -998,9 +998,7 @@ def _range_line(product, path: Path) -> str:
         f"|error/sigma| 95 % {_fmt(np.percentile(x, 95))}, "
         f"max {_fmt(x.max())}; used ranges without SP3 data: {c['rows_without_sp3']}"
         + (f" (PRN {', '.join(map(str, prns))})" if prns else "")
-        + (f"; duplicate observation records dropped: {c['duplicate_observation_rows']}"
-           if c.get("duplicate_observation_rows") else "")
-    )  # fmt: skip
+    )
 
 
 @main.command()

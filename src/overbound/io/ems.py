@@ -114,26 +114,38 @@ def read_ems(sources: Source | Sequence[Source], *, strict: bool = False) -> tup
             names[lines.file[i]], _explain(_REASONS[reason[i]], lines.length[i]), line=int(lines.lineno[i])
         )
     keep = ok[reason[ok] == _OK]
-    order = np.argsort(fields["time"], kind="stable")  # files may come in any order
+    rejected = (lines.file[rej], lines.lineno[rej], np.asarray(_REASONS)[reason[rej]])
+    frames = _frames_in_time_order(fields, lines.file[keep], lines.lineno[keep], names, rejected, strict)
+    return frames, _report(items, frames)
+
+
+def _frames_in_time_order(
+    fields: dict[str, np.ndarray],
+    file: np.ndarray,
+    line: np.ndarray,
+    names: tuple[str, ...],
+    rejected: tuple[np.ndarray, np.ndarray, np.ndarray],
+    strict: bool,
+) -> SbasFrames:
+    """The messages read (``fields``: time, prn, data, crc_ok; their file index and line) in time order
+    (stable: files may come in any order), with the rejected lines (file index, line, reason), duplicates
+    removed (:func:`_drop_duplicates`). Shared by the EMS and RINEX-B readers."""
+    order = np.argsort(fields["time"], kind="stable")
+    rej_file, rej_line, rej_reason = rejected
     frames = SbasFrames(
         time=fields["time"][order],
-        prn=fields["prn"][order],
-        data=fields["data"][order],
+        prn=np.asarray(fields["prn"])[order].astype(np.int16),
+        data=np.ascontiguousarray(fields["data"][order]),
         crc_ok=fields["crc_ok"][order],
-        file=lines.file[keep][order],
-        line=lines.lineno[keep][order],
+        file=file[order],
+        line=line[order],
         files=names,
         rejected=pl.DataFrame(
-            {
-                "file": [names[i] for i in lines.file[rej]],
-                "line": lines.lineno[rej],
-                "reason": np.asarray(_REASONS)[reason[rej]],
-            },
+            {"file": [names[i] for i in rej_file], "line": rej_line, "reason": rej_reason},
             schema=REJECTED_SCHEMA,
         ),
     )
-    frames = _sort_rejected(_drop_duplicates(frames, strict))
-    return frames, _report(items, frames)
+    return _sort_rejected(_drop_duplicates(frames, strict))
 
 
 def _slurp(source: Source) -> bytes:

@@ -50,14 +50,13 @@ import dataclasses
 from collections.abc import Sequence
 
 import numpy as np
-import polars as pl
 
-from overbound.io.ems import _HEX, _drop_duplicates, _gather, _join, _Lines, _report, _slurp, _sort_rejected
+from overbound.io.ems import _HEX, _frames_in_time_order, _gather, _join, _Lines, _report, _slurp
 from overbound.io.open import Source, source_name
 from overbound.io.schema import InputError, ReadReport
 from overbound.sbas.bits import FRAME_BYTES, message_type
 from overbound.sbas.crc import crc_ok
-from overbound.sbas.frames import REJECTED_SCHEMA, SbasFrames
+from overbound.sbas.frames import SbasFrames
 
 __all__ = ["RINEX_B_LAYOUT", "read_rinex_b"]
 
@@ -126,26 +125,10 @@ def read_rinex_b(
         raise InputError(names[lines.file[i]], _explain(_REASONS[rej_reason[0]]), line=int(lines.lineno[i]))
     keep = reason == 0
     kept_line = recs.line_index[keep]
-    t = recs.time[keep]
-    order = np.argsort(t, kind="stable")
-    frames = SbasFrames(
-        time=t[order],
-        prn=recs.prn[keep][order].astype(np.int16),
-        data=np.ascontiguousarray(data[keep][order]),
-        crc_ok=good_crc[keep][order],
-        file=lines.file[kept_line][order],
-        line=lines.lineno[kept_line][order],
-        files=names,
-        rejected=pl.DataFrame(
-            {
-                "file": [names[i] for i in lines.file[rej_lines]],
-                "line": lines.lineno[rej_lines],
-                "reason": np.asarray(_REASONS)[rej_reason],
-            },
-            schema=REJECTED_SCHEMA,
-        ),
-    )
-    frames = _sort_rejected(_drop_duplicates(frames, strict))
+    fields = {"time": recs.time[keep], "prn": recs.prn[keep], "data": data[keep], "crc_ok": good_crc[keep]}
+    rejected = (lines.file[rej_lines], lines.lineno[rej_lines], np.asarray(_REASONS)[rej_reason])
+    kept_file, kept_lineno = lines.file[kept_line], lines.lineno[kept_line]
+    frames = _frames_in_time_order(fields, kept_file, kept_lineno, names, rejected, strict)
     report = _report(items, frames)
     source = report.source if len(items) <= 3 else f"{len(items)} RINEX-B files"
     return frames, dataclasses.replace(report, format="rinex-b", source=source)
