@@ -552,20 +552,30 @@ def state_at(
     xp, yp = r * np.cos(u), r * np.sin(u)
     big_omega = g["omega0"] + (g["omega_dot"] - GPS_OMEGA_E) * tk - GPS_OMEGA_E * g["toe"]
     cos_o, sin_o, cos_i = np.cos(big_omega), np.sin(big_omega), np.cos(inc)
-    pos = np.stack(
-        [xp * cos_o - yp * cos_i * sin_o, xp * sin_o + yp * cos_i * cos_o, yp * np.sin(inc)], axis=-1
-    )
+    pos = np.empty((*np.shape(xp), 3))
+    pos[..., 0] = xp * cos_o - yp * cos_i * sin_o
+    pos[..., 1] = xp * sin_o + yp * cos_i * cos_o
+    pos[..., 2] = yp * np.sin(inc)
     clock, rel = _clock(g, time_us, offset_s, sin_e)
     return BroadcastState(pos, clock, rel, g["tgd"], ek)
 
 
 def _kepler(m: np.ndarray, e: np.ndarray) -> np.ndarray:
-    """Eccentric anomaly from Kepler's equation by Newton's method (quadratic convergence)."""
-    ek = m.copy()
+    """Eccentric anomaly from Kepler's equation by Newton's method (quadratic convergence), from E = M
+    until no step exceeds 1e-14 rad."""
+    ek = np.array(m, float)  # a copy: updated in place
+    step, tmp = np.empty_like(ek), np.empty_like(ek)
     for _ in range(20):
-        step = (ek - e * np.sin(ek) - m) / (1.0 - e * np.cos(ek))
+        np.sin(ek, out=step)  # step = (E - e sin E - M) / (1 - e cos E), the same operations in place
+        np.multiply(e, step, out=step)
+        np.subtract(ek, step, out=step)
+        np.subtract(step, m, out=step)
+        np.cos(ek, out=tmp)
+        np.multiply(e, tmp, out=tmp)
+        np.subtract(1.0, tmp, out=tmp)
+        np.divide(step, tmp, out=step)
         ek -= step
-        if not np.any(np.abs(step) > 1e-14):
+        if not np.abs(step, out=tmp).max(initial=0.0) > 1e-14:
             break
     return ek
 
@@ -581,4 +591,8 @@ def rotate_earth(position: np.ndarray, travel_time_s: np.ndarray | float) -> np.
     theta = GPS_OMEGA_E * np.asarray(travel_time_s, float)
     c, s = np.cos(theta), np.sin(theta)
     x, y = position[..., 0], position[..., 1]
-    return np.stack([x * c + y * s, -x * s + y * c, position[..., 2]], axis=-1)
+    out = np.empty(np.broadcast_shapes(position.shape, (*np.shape(theta), 3)))
+    out[..., 0] = x * c + y * s
+    out[..., 1] = -x * s + y * c
+    out[..., 2] = position[..., 2]
+    return out

@@ -763,10 +763,9 @@ def _geometry(ctx: _Context, eph: pl.DataFrame, pr: np.ndarray, ltc: dict, rx: n
     tx = -tau0 - clock_at(el, ti, -tau0)  # transmission time offset from the epoch, s (receiver clock ~ 0
     st = state_at(el, ti, tx)  # is not assumed: the clock bias cancels in the solution's clock term)
     pos = st.position + np.stack([ltc["dx"][i], ltc["dy"][i], ltc["dz"][i]], axis=-1)
-    for _ in range(2):
-        rho = np.linalg.norm(pos - rx, axis=-1)
-        rot = rotate_earth(pos, rho / C)
-    rho = np.linalg.norm(rot - rx, axis=-1)
+    # the light time from the position at transmission (one evaluation: the position does not change)
+    rot = rotate_earth(pos, _distance(pos, rx) / C)
+    rho = _distance(rot, rx)
     e, nn, u = pymap3d.ecef2enu(rot[:, 0], rot[:, 1], rot[:, 2], lat, lon,
                                 float(pymap3d.ecef2geodetic(*rx)[2]))  # fmt: skip
     out["rho"][i] = rho
@@ -781,6 +780,12 @@ def _geometry(ctx: _Context, eph: pl.DataFrame, pr: np.ndarray, ltc: dict, rx: n
     out["elev"][i] = np.arctan2(u, np.hypot(e, nn))
     out["azim"][i] = np.arctan2(e, nn)
     return out
+
+
+def _distance(pos: np.ndarray, rx: np.ndarray) -> np.ndarray:
+    """|pos - rx| per row of an (n, 3) array, by columns (no (n, 3) temporaries)."""
+    d = [pos[:, k] - rx[k] for k in range(3)]
+    return np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
 
 
 def _ephemeris_rows(ctx: _Context, eph: pl.DataFrame, iode: np.ndarray) -> np.ndarray:
@@ -815,7 +820,7 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
     where = mk.select("band", "iodi", "igp", "lat", "lon").unique(("band", "iodi", "igp"), keep="last")
     g = m.iono.join(where, on=("band", "iodi", "igp"), how="inner").drop_nulls(("lat", "lon"))
     tg = times_us(g["time"])
-    gkey = _grid_key(g["lat"].to_numpy(), g["lon"].to_numpy())
+    gkey = ionomod.igp_key(g["lat"].to_numpy(), g["lon"].to_numpy())
     t_av = ctx.t_avail
     sel = geom["elev"] > 0
     idx = np.flatnonzero(sel)
@@ -824,8 +829,8 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
     # The mask in force changes rarely: per epoch, the IODI of each band, and per distinct set of band
     # IODIs ("mask version") which 5-degree IGP positions are in the mask.
     mk_pos = mk.drop_nulls(("lat", "lon"))
-    member = np.unique(_mask_code(mk_pos["band"].to_numpy(), mk_pos["iodi"].to_numpy(),
-                                  _grid_key(mk_pos["lat"].to_numpy(), mk_pos["lon"].to_numpy())))  # fmt: skip
+    pos_key = ionomod.igp_key(mk_pos["lat"].to_numpy(), mk_pos["lon"].to_numpy())
+    member = np.unique(_mask_code(mk_pos["band"].to_numpy(), mk_pos["iodi"].to_numpy(), pos_key))
     bands = np.unique(band_key)
     ep_t, ep = ctx.epochs_us - flight_us, ctx.epoch  # the same t_avail for every row of an epoch
     # IODI per (band, epoch), -2 where no MT 18 of the band; a last row of -2 for bands not in the mask
@@ -836,15 +841,15 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
     change[1:] = (iodi_ep[:, 1:] != iodi_ep[:, :-1]).any(axis=0)
     version_ep = np.cumsum(change) - 1
     versions = iodi_ep[:-1, change].T
-    all_keys = np.arange(_N_GRID_KEYS, dtype=np.int64)
-    in_version = np.zeros((versions.shape[0], _N_GRID_KEYS), bool)
+    all_keys = np.arange(ionomod.N_IGP_KEYS, dtype=np.int64)
+    in_version = np.zeros((versions.shape[0], ionomod.N_IGP_KEYS), bool)
     for v, iodis in enumerate(versions.tolist()):
         for b, iodi_b in zip(bands.tolist(), iodis, strict=True):
             if iodi_b >= 0:
                 in_version[v] |= np.isin(_mask_code(b, iodi_b, all_keys), member)
 
-    def in_mask(rows: np.ndarray, clat: np.ndarray, clon: np.ndarray) -> np.ndarray:
-        return in_version[version_ep[ep[idx[rows]]][:, None], _grid_key(clat, clon)]
+    def in_mask(rows: np.ndarray, key: np.ndarray) -> np.ndarray:
+        return in_version[version_ep[ep[idx[rows]]][:, None], key]
 
     g_band = g["band"].to_numpy().astype(np.int64)
     pos_b = np.searchsorted(bands, g_band)  # row of iodi_ep of each grid value's band
@@ -858,17 +863,29 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
     band_row_g = np.append(g_band_row, bands.size)
     give_g = np.append(np.isfinite(g["sigma2_give"].to_numpy()), False)
     dnu_g = np.append(g["givd_dnu"].to_numpy().astype(bool), False)
+    # The grid value of each IGP at each epoch (the latest MT 26 available, as corrections.asof) and
+    # whether it is current (its IODI that of its band's mask in force), tabulated once per "grid state":
+    # the epochs between two changes of the MT 26 tags available or of the mask version.
+    cells = _GridStates(gkey, tg, ep_t, version_ep)
+    value = cells.table  # (states, IGPs) row of g, -1 for none
+    cur = iodi_g[value] == iodi_ep[:, change][band_row_g[value], cells.version[:, None]]
+    flags = (cur & give_g[value]).astype(np.int8) | ((cur & dnu_g[value]).astype(np.int8) << 1)
+    state_ep = cells.state_ep
+    # the time-out test of age = (t - tag) / US - flight <= timeout as tag >= t - d_max, the same
+    # predicate (the float expression grows with the integer t - tag)
+    d_max = _largest_age_us(ctx.timeout(26), ctx.opt.flight_time)
     found_r: dict[str, np.ndarray] = {}
 
-    def status(rows: np.ndarray, clat: np.ndarray, clon: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        tq = t_av[idx[rows]][:, None]
-        r = asof(gkey, tg, _grid_key(clat, clon).ravel(), np.repeat(tq, 4), ctx.base).reshape(clat.shape)
+    def status(rows: np.ndarray, key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        cell = cells.cell(state_ep[ep[idx[rows]]], key)
+        r = value.ravel()[cell]
         found_r["rows"], found_r["r"] = rows, r  # kept for the interpolation below
-        age = (tq + flight_us - tag_g[r]) / US - ctx.opt.flight_time
-        current = iodi_g[r] == iodi_ep[band_row_g[r], ep[idx[rows]][:, None]]
-        return current & (age <= ctx.timeout(26)) & give_g[r], current & dnu_g[r]
+        fl = flags.ravel()[cell]
+        fresh = tag_g[r] >= (ctx.t[idx[rows]] - d_max)[:, None]
+        return ((fl & 1) != 0) & fresh, (fl & 2) != 0
 
-    sel = ionomod.select_and_interpolate(np.rad2deg(lat_pp[idx]), np.rad2deg(lon_pp[idx]), in_mask, status)
+    sel = ionomod.select_and_interpolate(np.rad2deg(lat_pp[idx]), np.rad2deg(lon_pp[idx]), in_mask, status,
+                                         keyed=True)  # fmt: skip
     ok_sub, w, mode_sub = sel.ok, sel.weights, sel.mode
     # only pierce points with a cell can have a correction (ok_sub False elsewhere): the grid values
     # are those of status()'s look-up
@@ -925,24 +942,52 @@ def _klobuchar_fallback(
     return rows
 
 
-#: Number of :func:`_grid_key` values (latitudes -90..90 by 5 deg, 72 longitudes).
-_N_GRID_KEYS = 37 * 72
-
-
-def _grid_key(lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
-    """One integer per 5-degree IGP position (latitude in [-90, 90], longitude in [-180, 180]).
-
-    IGP coordinates are whole multiples of 5 deg, so the divisions are exact and the conversion
-    needs no rounding.
-    """
-    i = ((np.asarray(lat, float) + 90) / 5).astype(np.int64)
-    j = ((np.asarray(lon, float) + 180) / 5).astype(np.int64)
-    return i * 72 + np.where(j >= 72, j - 72, j)
-
-
 def _mask_code(band: np.ndarray | int, iodi: np.ndarray, key: np.ndarray) -> np.ndarray:
     """One integer per (band, IODI, IGP position)."""
     return (np.asarray(band, np.int64) * 4 + np.asarray(iodi, np.int64)) * 4096 + np.asarray(key, np.int64)
+
+
+class _GridStates:
+    """The latest MT 26 row of each IGP per grid state (as :func:`overbound.sbas.corrections.asof`).
+
+    A state is a run of epochs with the same MT 26 tags available (tag <= t_avail) and the same mask
+    version. ``table`` is (states, IGPs + 1): the row of the grid values with the largest tag (the
+    last in table order among equal tags) per IGP, -1 where none; the last column is for IGPs without
+    any MT 26 value. ``state_ep``: each epoch's state; ``version``: each state's mask version.
+    """
+
+    def __init__(self, gkey: np.ndarray, tg: np.ndarray, ep_t: np.ndarray, version_ep: np.ndarray) -> None:
+        keys, kcol = np.unique(gkey, return_inverse=True)
+        self.column = np.full(ionomod.N_IGP_KEYS, keys.size, np.int64)  # grid key -> column
+        self.column[keys] = np.arange(keys.size)
+        tags, tag_i = np.unique(tg, return_inverse=True)
+        n_avail = np.searchsorted(tags, ep_t, side="right")  # distinct tags available at each epoch
+        by_tag = np.full((tags.size + 1, keys.size + 1), -1, np.int64)
+        np.maximum.at(by_tag, (tag_i + 1, kcol), np.arange(tg.size))  # largest row among equal tags
+        # forward fill: the last tag count up to each one with a value of the IGP
+        last = np.where(by_tag >= 0, np.arange(tags.size + 1)[:, None], 0)
+        np.maximum.accumulate(last, axis=0, out=last)
+        by_tag = np.take_along_axis(by_tag, last, axis=0)
+        new = np.ones(ep_t.size, bool)
+        new[1:] = (n_avail[1:] != n_avail[:-1]) | (version_ep[1:] != version_ep[:-1])
+        self.state_ep = np.cumsum(new) - 1
+        self.version = version_ep[new]
+        self.table = by_tag[n_avail[new]]
+        self.width = keys.size + 1
+
+    def cell(self, state: np.ndarray, key: np.ndarray) -> np.ndarray:
+        """Flat index into ``table`` of (state per row, grid keys (rows, k))."""
+        return state[:, None] * self.width + self.column[key]
+
+
+def _largest_age_us(timeout: float, flight: float) -> int:
+    """The largest integer d (us) with d / US - flight <= timeout in floating point (ages of integer tags)."""
+    d = round((timeout + flight) * US)
+    while d / US - flight > timeout:
+        d -= 1
+    while (d + 1) / US - flight <= timeout:
+        d += 1
+    return d
 
 
 def _band_iodi(mk: pl.DataFrame, band_key: np.ndarray, tmk: np.ndarray, band_q: np.ndarray, t_q: np.ndarray,

@@ -27,8 +27,9 @@ from typing import NamedTuple
 import numpy as np
 
 __all__ = [
-    "FAIL_DONT_USE", "FAIL_NO_CELL", "FAIL_OUTSIDE", "FAIL_POLAR", "FAIL_UNUSABLE", "H_IONO", "R_EARTH",
-    "GridSelection", "obliquity", "pierce_point", "select_and_interpolate",
+    "FAIL_DONT_USE", "FAIL_NO_CELL", "FAIL_OUTSIDE", "FAIL_POLAR", "FAIL_UNUSABLE", "H_IONO", "N_IGP_KEYS",
+    "R_EARTH", "GridSelection", "igp_key", "igp_position", "obliquity", "pierce_point",
+    "select_and_interpolate",
 ]  # fmt: skip
 
 R_EARTH = 6378136.3  # m
@@ -58,11 +59,6 @@ def obliquity(elev_rad: np.ndarray) -> np.ndarray:
     return 1.0 / np.sqrt(1.0 - (R_EARTH * np.cos(elev_rad) / (R_EARTH + H_IONO)) ** 2)
 
 
-def _wrap(lon: np.ndarray) -> np.ndarray:
-    """IGP longitudes (multiples of 5 deg in [-190, 190)) into [-180, 180), exactly, by a select."""
-    return np.where(lon >= 180, lon - 360, np.where(lon < -180, lon + 360, lon))
-
-
 def _triangle_weights(x: np.ndarray, y: np.ndarray, missing: np.ndarray) -> np.ndarray:
     """Barycentric weights (n, 4) of (x, y) in the right triangle of the corners other than ``missing``.
 
@@ -88,19 +84,27 @@ def _triangle_weights(x: np.ndarray, y: np.ndarray, missing: np.ndarray) -> np.n
 class GridSelection(NamedTuple):
     """Result of :func:`select_and_interpolate` (arrays over the pierce points).
 
-    ok : a correction is available. clat, clon : (n, 4) coordinates of the selected cell's corners
-    (NE, NW, SW, SE). weights : (n, 4), 0 for a corner not used. mode : 0 four points, 1..4 the
-    corner left out of a triangle (gLAB's code), -1 none; the engine's ``iono_mode`` column is this
-    code, or 5 (:data:`overbound.sbas.engine.IONO_MODE_KLOBUCHAR`) where NPA fell back on the GPS
-    broadcast model. fail : why not (``FAIL_*``, 0 if ok).
+    ok : a correction is available. key : (n, 4) :func:`igp_key` of the selected cell's corners (NE,
+    NW, SW, SE), -1 without a cell; ``clat``, ``clon`` give their coordinates (0 without a cell).
+    weights : (n, 4), 0 for a corner not used. mode : 0 four points, 1..4 the corner left out of a
+    triangle (gLAB's code), -1 none; the engine's ``iono_mode`` column is this code, or 5
+    (:data:`overbound.sbas.engine.IONO_MODE_KLOBUCHAR`) where NPA fell back on the GPS broadcast model.
+    fail : why not (``FAIL_*``, 0 if ok).
     """
 
     ok: np.ndarray
-    clat: np.ndarray
-    clon: np.ndarray
+    key: np.ndarray
     weights: np.ndarray
     mode: np.ndarray
     fail: np.ndarray
+
+    @property
+    def clat(self) -> np.ndarray:
+        return np.where(self.key >= 0, igp_position(np.maximum(self.key, 0))[0], 0.0)
+
+    @property
+    def clon(self) -> np.ndarray:
+        return np.where(self.key >= 0, igp_position(np.maximum(self.key, 0))[1], 0.0)
 
 
 #: Failure codes of :func:`select_and_interpolate`.
@@ -131,18 +135,67 @@ def _candidates(lat: np.ndarray, lon: np.ndarray) -> list[tuple[np.ndarray, np.n
     ]
 
 
-def _triangle_ok(sel: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """For cells with exactly three selected corners: the left-out corner, weights, and inside."""
-    missing = np.argmin(sel, axis=1)
+#: Number of :func:`igp_key` values (latitudes -90..90 by 5 deg, 72 longitudes).
+N_IGP_KEYS = 37 * 72
+
+
+def igp_key(lat: np.ndarray, lon: np.ndarray) -> np.ndarray:
+    """One integer per 5-degree IGP position (latitude in [-90, 90], longitude in [-180, 180]).
+
+    IGP coordinates are whole multiples of 5 deg, so the divisions are exact and the conversion
+    needs no rounding.
+    """
+    i = ((np.asarray(lat, float) + 90) / 5).astype(np.int64)
+    j = ((np.asarray(lon, float) + 180) / 5).astype(np.int64)
+    return i * 72 + np.where(j >= 72, j - 72, j)
+
+
+def igp_position(key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Latitude and longitude (deg, longitude in [-180, 180)) of :func:`igp_key` values."""
+    key = np.asarray(key, np.int64)
+    return (key // 72 * 5 - 90).astype(float), (key % 72 * 5 - 180).astype(float)
+
+
+def _corner_keys(la0: np.ndarray, lo0: np.ndarray, dlat: float, dlon: np.ndarray) -> np.ndarray:
+    """:func:`igp_key` of the corners (NE, NW, SW, SE) of cells given by their south-west corner (multiples
+    of 5 deg, ``lo0`` possibly outside [-180, 180)) and size, in integers: longitudes wrap by a modulo."""
+    i = ((la0 + 90) / 5).astype(np.int64) * 72
+    i_n = i + round(dlat / 5) * 72
+    j_w = ((lo0 + 180) / 5).astype(np.int64) % 72
+    j_e = (j_w + (dlon / 5).astype(np.int64)) % 72
+    return np.stack([i_n + j_e, i_n + j_w, i + j_w, i + j_e], axis=-1)
+
+
+#: Per 4-bit corner code (bit k: corner k, in the order NE, NW, SW, SE): the number of corners, and for
+#: three corners the one left out.
+_N_CORNERS = np.array([bin(c).count("1") for c in range(16)])
+_LEFT_OUT = np.array([(~c & 15).bit_length() - 1 if bin(c).count("1") == 3 else 0 for c in range(16)])
+
+
+def _code(corners: np.ndarray) -> np.ndarray:
+    """(n, 4) bool -> (n,) uint8 with bit k set for corner k."""
+    return np.packbits(np.asarray(corners, bool), axis=-1, bitorder="little")[:, 0]
+
+
+def _triangle_inside(code: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
+    """For cells with three corners (``code``): the left-out corner, weights, and whether (x, y) is inside."""
+    missing = _LEFT_OUT[code]
     w3 = _triangle_weights(x, y, missing)
     return missing, w3, (w3 >= -1e-12).all(axis=1)
+
+
+def _by_position(fn: Callable) -> Callable:
+    """A callback of (rows, lat, lon) as one of (rows, key)."""
+    return lambda rows, key: fn(rows, *igp_position(key))
 
 
 def select_and_interpolate(
     lat_pp_deg: np.ndarray,
     lon_pp_deg: np.ndarray,
-    in_mask: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray],
-    status: Callable[[np.ndarray, np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]],
+    in_mask: Callable[..., np.ndarray],
+    status: Callable[..., tuple[np.ndarray, np.ndarray]],
+    *,
+    keyed: bool = False,
 ) -> GridSelection:
     """Select the IGPs around each pierce point and their interpolation weights (DO-229D A.4.4.10.2-3).
 
@@ -162,88 +215,84 @@ def select_and_interpolate(
     in_mask : ``in_mask(rows, lat, lon)`` -> (len(rows), 4) bool, the IGP at (lat, lon) is in the
         mask in force at pierce point ``rows``' epoch (``rows`` index the inputs).
     status : ``status(rows, lat, lon)`` -> (usable, dont_use), each (len(rows), 4) bool.
+    keyed : the callbacks take ``(rows, key)`` instead, ``key`` the (len(rows), 4) :func:`igp_key` of
+        the IGPs (no conversion from coordinates).
     """
     lat = np.asarray(lat_pp_deg, float)
     lon = np.asarray(lon_pp_deg, float)
+    if not keyed:
+        in_mask, status = _by_position(in_mask), _by_position(status)
     n = lat.size
-    found = np.zeros(n, bool)
-    clat = np.zeros((n, 4))
-    clon = np.zeros((n, 4))
-    x = np.zeros(n)
-    y = np.zeros(n)
-    sel = np.zeros((n, 4), bool)
     mid = np.abs(lat) <= 60
-    high = (np.abs(lat) > 60) & (np.abs(lat) <= 75)
-    first = (np.floor(lat / 5) * 5, np.where(mid, np.floor(lon / 5) * 5, np.floor(lon / 10) * 10),
-             5.0, np.where(mid, 5.0, 10.0))  # fmt: skip
-    todo_all = mid | high
-
-    def take(idx: np.ndarray, la0: np.ndarray, lo0: np.ndarray, dlat: float, dlon: np.ndarray,
-             want: int) -> None:  # fmt: skip
-        """Try one cell for the pierce points idx; keep those with ``want`` (4 or 3) corners in the mask."""
-        ok_geom = np.isfinite(lo0)
-        idx, la0, lo0, dlon = idx[ok_geom], la0[ok_geom], lo0[ok_geom], dlon[ok_geom]
-        if idx.size == 0:
-            return
-        la = la0[:, None] + _CORNERS[:, 1] * dlat
-        lo = _wrap(lo0[:, None] + _CORNERS[:, 0] * dlon[:, None])
-        m = in_mask(idx, la, lo)
-        xx = (lon[idx] - lo0) / dlon  # lo0 <= lon < lo0 + 15 (lo0 not wrapped): no wrap
-        yy = (lat[idx] - la0) / dlat
-        if want == 4:
-            good = m.all(axis=1)
-        else:
-            good = m.sum(axis=1) == 3
-            good[good] = _triangle_ok(m[good], xx[good], yy[good])[2]  # only where three are in the mask
-        g = idx[good]
-        found[g] = True
-        clat[g], clon[g], x[g], y[g], sel[g] = la[good], lo[good], xx[good], yy[good], m[good]
-
-    idx = np.flatnonzero(todo_all)
+    todo = mid | ((np.abs(lat) > 60) & (np.abs(lat) <= 75))
+    idx = np.flatnonzero(todo)
+    at = slice(None) if idx.size == n else idx  # usually every point: views, not gathers
+    # the selected cell per pierce point: south-west corner, size, corner keys, corners in the mask
+    la0 = np.floor(lat / 5) * 5
+    lo0 = np.where(mid, np.floor(lon / 5) * 5, np.floor(lon / 10) * 10)
+    dlon = np.where(mid, 5.0, 10.0)
+    key = np.zeros((n, 4), np.int64)
+    x = (lon - lo0) / dlon  # lo0 <= lon < lo0 + 15 (lo0 not wrapped): no wrap
+    y = (lat - la0) / 5.0
     # (a), (b): the first cell, tried for every pierce point at once (most end here with four IGPs)
-    la = first[0][idx, None] + _CORNERS[:, 1] * first[2]
-    lo = _wrap(first[1][idx, None] + _CORNERS[:, 0] * first[3][idx, None])
-    m = in_mask(idx, la, lo)
-    xx = (lon[idx] - first[1][idx]) / first[3][idx]
-    yy = (lat[idx] - first[0][idx]) / first[2]
-    good = m.all(axis=1)
-    three = ~good & (m.sum(axis=1) == 3)
-    good[three] = _triangle_ok(m[three], xx[three], yy[three])[2]
-    found[idx], clat[idx], clon[idx], x[idx], y[idx], sel[idx] = good, la, lo, xx, yy, m
+    key[at] = _corner_keys(la0[at], lo0[at], 5.0, dlon[at])
+    code = np.zeros(n, np.uint8)
+    code[at] = _code(in_mask(idx, key[at]))
+    found = code == 15
+    three = np.flatnonzero(todo & (_N_CORNERS[code] == 3))
+    found[three] = _triangle_inside(code[three], x[three], y[three])[2]
+
+    def take(rest: np.ndarray, la_c: np.ndarray, lo_c: np.ndarray, dlat_c: float, dlon_c: float,
+             want: int) -> None:  # fmt: skip
+        """Try one 10x10 cell for the pierce points ``rest``; keep those with ``want`` (4 or 3) corners in
+        the mask (three: their triangle containing the pierce point)."""
+        ok_geom = np.isfinite(lo_c)
+        rest, la_c, lo_c = rest[ok_geom], la_c[ok_geom], lo_c[ok_geom]
+        if rest.size == 0:
+            return
+        k = _corner_keys(la_c, lo_c, dlat_c, np.full(rest.size, dlon_c))
+        c = _code(in_mask(rest, k))
+        xx = (lon[rest] - lo_c) / dlon_c
+        yy = (lat[rest] - la_c) / dlat_c
+        good = c == 15 if want == 4 else _N_CORNERS[c] == 3
+        if want == 3:
+            good[good] = _triangle_inside(c[good], xx[good], yy[good])[2]  # only where three are in the mask
+        g = rest[good]
+        found[g], key[g], code[g], x[g], y[g] = True, k[good], c[good], xx[good], yy[good]
+
     cands = _candidates(lat, lon)
     for want in (4, 3):  # (c), (d): the 10x10 cells
-        for la0, lo0, dlat, dlon in cands:
+        for la_c, lo_c, dlat_c, dlon_c in cands:
             rest = idx[~found[idx]]
-            take(rest, la0[rest], lo0[rest], dlat, np.full(rest.size, dlon), want)
-    lost = ~found  # what the first cell left behind is no selection
-    sel[lost], clat[lost], clon[lost] = False, 0.0, 0.0
+            take(rest, la_c[rest], lo_c[rest], dlat_c, dlon_c, want)
 
-    fail = np.where(todo_all, FAIL_NO_CELL, FAIL_POLAR)
+    fail = np.where(todo, FAIL_NO_CELL, FAIL_POLAR)
     ok = np.zeros(n, bool)
     weights = np.zeros((n, 4))
     mode = np.full(n, -1)
+    key[np.flatnonzero(~found)] = -1
     f = np.flatnonzero(found)
     if f.size:
-        usable, dnu = status(f, clat[f], clon[f])
-        s = sel[f]
-        bad = s & ~usable
-        n_sel, n_bad = s.sum(axis=1), bad.sum(axis=1)
-        four = (n_sel == 4) & (n_bad == 0)
-        dont = (s & dnu).any(axis=1)
+        usable, dnu = status(f, key[f])
+        s = code[f]
+        good_c = s & _code(usable)  # selected and usable
+        n_sel, n_good = _N_CORNERS[s], _N_CORNERS[good_c]
+        four = good_c == 15
+        dont = (s & _code(dnu)) != 0
         xf, yf = x[f], y[f]
         w = np.stack([xf * yf, (1 - xf) * yf, (1 - xf) * (1 - yf), xf * (1 - yf)], axis=-1)
         m_f = np.where(four, 0, -1)
         # triangles only where one is asked for: three selected, or four with one unusable
-        tri = np.flatnonzero(((n_sel == 3) & (n_bad == 0)) | ((n_sel == 4) & (n_bad == 1)))
-        missing, w3, inside = _triangle_ok((s & ~bad)[tri], xf[tri], yf[tri])
-        three = np.zeros(f.size, bool)
-        three[tri] = (n_sel[tri] == 3) | inside
-        good = (four | three) & ~dont
+        tri = np.flatnonzero(n_good == 3)
+        missing, w3, inside = _triangle_inside(good_c[tri], xf[tri], yf[tri])
+        three_ok = np.zeros(f.size, bool)
+        three_ok[tri] = (n_sel[tri] == 3) | inside
+        good = (four | three_ok) & ~dont
         w[tri] = w3
-        m_f[tri] = np.where(three[tri], missing + 1, -1)
+        m_f[tri] = np.where(three_ok[tri], missing + 1, -1)
         ok[f] = good
         weights[f] = np.where(good[:, None], w, 0.0)
         mode[f] = np.where(good, m_f, -1)
-        outside = (n_sel == 4) & (n_bad == 1) & ~three
+        outside = (n_sel == 4) & (n_good == 3) & ~three_ok
         fail[f] = np.select([good, dont, outside], [0, FAIL_DONT_USE, FAIL_OUTSIDE], FAIL_UNUSABLE)
-    return GridSelection(ok, clat, clon, weights, mode, fail)
+    return GridSelection(ok, key, weights, mode, fail)
