@@ -503,30 +503,41 @@ _ELEMENTS = ("e", "sqrt_a", "delta_n", "m0", "omega", "cuc", "cus", "crc", "crs"
 
 def ephemeris_elements(eph: pl.DataFrame, rows: np.ndarray) -> dict[str, np.ndarray]:
     """The broadcast elements of ``eph[rows]`` (and ``toe_us``, ``toc_us``), gathered once for
-    :func:`state_at` and :func:`clock_at` (several evaluations of the same records)."""
+    :func:`state_at` and :func:`clock_at` (several evaluations of the same records).
+
+    Also the terms of IS-GPS-200 Table 20-IV and 20.3.3.3.3.1 that depend on the record alone,
+    computed once per record of ``eph`` and then gathered (the same numbers as per evaluation):
+    ``a`` = sqrt_a^2, ``n`` = sqrt(mu / A^3) + delta_n, ``sqrt_1_e2`` = sqrt(1 - e^2),
+    ``f_e_sqrt_a`` = F e sqrt(A), ``omega_dot_rel`` = OmegaDot - OmegaDot_e and ``omega_e_toe`` =
+    OmegaDot_e toe.
+    """
     rows = np.asarray(rows, np.int64)
     if (rows < 0).any():
         raise ValueError("rows must be >= 0 (select_ephemeris gives -1 where no ephemeris qualifies)")
-    g = {c: eph[c].to_numpy()[rows] for c in _ELEMENTS}
-    g["toe_us"] = eph["toe_time"].dt.epoch("us").to_numpy()[rows]
-    g["toc_us"] = eph["toc"].dt.epoch("us").to_numpy()[rows]
-    return g
+    tab = {c: eph[c].to_numpy() for c in _ELEMENTS}
+    tab["toe_us"] = eph["toe_time"].dt.epoch("us").to_numpy()
+    tab["toc_us"] = eph["toc"].dt.epoch("us").to_numpy()
+    tab["a"] = tab["sqrt_a"] ** 2
+    tab["n"] = np.sqrt(GPS_MU / tab["a"] ** 3) + tab["delta_n"]
+    tab["sqrt_1_e2"] = np.sqrt(1.0 - tab["e"] ** 2)
+    tab["f_e_sqrt_a"] = GPS_F * tab["e"] * tab["sqrt_a"]
+    tab["omega_dot_rel"] = tab["omega_dot"] - GPS_OMEGA_E
+    tab["omega_e_toe"] = GPS_OMEGA_E * tab["toe"]
+    return {c: v[rows] for c, v in tab.items()}
 
 
 def _anomaly(g: dict[str, np.ndarray], time_us: np.ndarray, offset: np.ndarray | float) -> tuple:
     """t_k, A and E_k (IS-GPS-200 Table 20-IV)."""
     tk = (time_us - g["toe_us"]) / US + offset
-    a = g["sqrt_a"] ** 2
-    n = np.sqrt(GPS_MU / a**3) + g["delta_n"]
-    mk = g["m0"] + n * tk
-    return tk, a, _kepler(mk, g["e"])
+    mk = g["m0"] + g["n"] * tk
+    return tk, g["a"], _kepler(mk, g["e"])
 
 
 def _clock(g: dict[str, np.ndarray], time_us: np.ndarray, offset: np.ndarray | float,
            sin_e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
     """Clock offset and its relativistic term (IS-GPS-200 20.3.3.3.3.1)."""
     dt = (time_us - g["toc_us"]) / US + offset
-    rel = GPS_F * g["e"] * g["sqrt_a"] * sin_e
+    rel = g["f_e_sqrt_a"] * sin_e
     return g["af0"] + g["af1"] * dt + g["af2"] * dt**2 + rel, rel
 
 
@@ -543,14 +554,15 @@ def state_at(
     time_us = np.asarray(time_us, np.int64)
     tk, a, ek = _anomaly(g, time_us, offset_s)
     sin_e, cos_e = np.sin(ek), np.cos(ek)
-    nu = np.arctan2(np.sqrt(1.0 - g["e"] ** 2) * sin_e, cos_e - g["e"])
+    nu = np.arctan2(g["sqrt_1_e2"] * sin_e, cos_e - g["e"])
     phi = nu + g["omega"]
-    s2, c2 = np.sin(2 * phi), np.cos(2 * phi)
+    two_phi = 2 * phi
+    s2, c2 = np.sin(two_phi), np.cos(two_phi)
     u = phi + g["cus"] * s2 + g["cuc"] * c2
     r = a * (1.0 - g["e"] * cos_e) + g["crs"] * s2 + g["crc"] * c2
     inc = g["i0"] + g["cis"] * s2 + g["cic"] * c2 + g["idot"] * tk
     xp, yp = r * np.cos(u), r * np.sin(u)
-    big_omega = g["omega0"] + (g["omega_dot"] - GPS_OMEGA_E) * tk - GPS_OMEGA_E * g["toe"]
+    big_omega = g["omega0"] + g["omega_dot_rel"] * tk - g["omega_e_toe"]
     cos_o, sin_o, cos_i = np.cos(big_omega), np.sin(big_omega), np.cos(inc)
     pos = np.empty((*np.shape(xp), 3))
     pos[..., 0] = xp * cos_o - yp * cos_i * sin_o
@@ -562,22 +574,39 @@ def state_at(
 
 def _kepler(m: np.ndarray, e: np.ndarray) -> np.ndarray:
     """Eccentric anomaly from Kepler's equation by Newton's method (quadratic convergence), from E = M
-    until no step exceeds 1e-14 rad."""
-    ek = np.array(m, float)  # a copy: updated in place
-    step, tmp = np.empty_like(ek), np.empty_like(ek)
+    until no step exceeds 1e-14 rad.
+
+    A value whose step is exactly 0 would stay as it is in every later iteration: once most values are
+    there, the iterations go on with the others only (the same numbers, less work).
+    """
+    shape = np.shape(m)
+    ek = np.array(m, float).ravel()  # a copy: updated in place
+    m_k, e_k = np.asarray(m, float).ravel(), np.broadcast_to(np.asarray(e, float), shape).ravel()
+    live: np.ndarray | None = None  # positions in ek of the values still iterated (None: all, in place)
+    x = ek
+    step, tmp = np.empty_like(x), np.empty_like(x)
     for _ in range(20):
-        np.sin(ek, out=step)  # step = (E - e sin E - M) / (1 - e cos E), the same operations in place
-        np.multiply(e, step, out=step)
-        np.subtract(ek, step, out=step)
-        np.subtract(step, m, out=step)
-        np.cos(ek, out=tmp)
-        np.multiply(e, tmp, out=tmp)
+        np.sin(x, out=step)  # step = (E - e sin E - M) / (1 - e cos E), the same operations in place
+        np.multiply(e_k, step, out=step)
+        np.subtract(x, step, out=step)
+        np.subtract(step, m_k, out=step)
+        np.cos(x, out=tmp)
+        np.multiply(e_k, tmp, out=tmp)
         np.subtract(1.0, tmp, out=tmp)
         np.divide(step, tmp, out=step)
-        ek -= step
+        x -= step
         if not np.abs(step, out=tmp).max(initial=0.0) > 1e-14:
             break
-    return ek
+        moving = np.flatnonzero(step)
+        if moving.size < x.size // 2:
+            if live is not None:
+                ek[live] = x
+            live = moving if live is None else live[moving]
+            x, m_k, e_k = x[moving], m_k[moving], e_k[moving]
+            step, tmp = np.empty_like(x), np.empty_like(x)
+    if live is not None:
+        ek[live] = x
+    return ek.reshape(shape)
 
 
 def rotate_earth(position: np.ndarray, travel_time_s: np.ndarray | float) -> np.ndarray:

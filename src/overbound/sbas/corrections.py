@@ -19,7 +19,8 @@ import numpy as np
 import polars as pl
 
 __all__ = [
-    "US", "asof", "earliest_within", "previous_other_value", "previous_same_key", "segments", "times_us",
+    "US", "asof", "earliest_within", "packed_order", "previous_other_value", "previous_same_key", "segments",
+    "times_us",
 ]  # fmt: skip
 
 US = 1_000_000
@@ -31,24 +32,42 @@ def times_us(col: pl.Series) -> np.ndarray:
     return col.dt.epoch("us").to_numpy().astype(np.int64)
 
 
-def asof(key_tab: np.ndarray, t_tab: np.ndarray, key_q: np.ndarray, t_q: np.ndarray, base: int) -> np.ndarray:
+def packed_order(key_tab: np.ndarray, t_tab: np.ndarray, base: int) -> tuple[np.ndarray, np.ndarray]:
+    """The stable order of the table's rows by (key, time) packed into one int64, and those packed values
+    in that order.
+
+    Pass the pair as ``packed=`` to several look-ups of one table (:func:`asof`,
+    :func:`previous_same_key`, :func:`earliest_within`) to sort it once. A table in time order (the
+    decoded messages are) with keys below 2^16 is sorted by key alone, by a radix sort: the same
+    order, as the sort is stable.
+    """
+    key_tab = np.asarray(key_tab, np.int64)
+    t_tab = np.asarray(t_tab, np.int64)
+    packed = key_tab * _SPAN + np.clip(t_tab - base, 0, _SPAN - 1)
+    if key_tab.size and key_tab.min() >= 0 and key_tab.max() < 1 << 16 and (t_tab[1:] >= t_tab[:-1]).all():
+        order = np.argsort(key_tab.astype(np.uint16), kind="stable")
+    else:
+        order = np.argsort(packed, kind="stable")
+    return order, packed[order]
+
+
+def asof(key_tab: np.ndarray, t_tab: np.ndarray, key_q: np.ndarray, t_q: np.ndarray, base: int, *,
+         packed: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:  # fmt: skip
     """Row of the table with ``key_tab == key_q`` and the largest ``t_tab <= t_q`` (-1 if none).
 
     Ties in time keep the last row in table order. Times are int64 microseconds; ``base`` is
-    subtracted so that (key, time) packs into one int64 (keys below 2^21).
+    subtracted so that (key, time) packs into one int64 (keys below 2^21). ``packed``: the
+    table's :func:`packed_order`, when it is already at hand.
     """
     key_tab = np.asarray(key_tab, np.int64)
     if key_tab.size == 0:  # e.g. no MT 6 in a short window
         return np.full(np.shape(key_q), -1, np.int64)
-    packed = key_tab * _SPAN + np.clip(np.asarray(t_tab, np.int64) - base, 0, _SPAN - 1)
-    order = np.argsort(packed, kind="stable")
-    sp = packed[order]
+    order, sp = packed or packed_order(key_tab, t_tab, base)
     kq = np.asarray(key_q, np.int64)
     q = kq * _SPAN + _offset(t_q, base)
     pos = np.searchsorted(sp, q, side="right") - 1
-    p0 = np.maximum(pos, 0)
-    hit = (pos >= 0) & (key_tab[order][p0] == kq)
-    return np.where(hit, order[p0], -1)
+    row = order[np.maximum(pos, 0)]
+    return np.where((pos >= 0) & (key_tab[row] == kq), row, -1)
 
 
 def _offset(t: np.ndarray, base: int) -> np.ndarray:
@@ -59,11 +78,14 @@ def _offset(t: np.ndarray, base: int) -> np.ndarray:
     return d
 
 
-def previous_same_key(key_tab: np.ndarray, t_tab: np.ndarray, base: int) -> np.ndarray:
-    """For every row, the row before it in (key, time) order with the same key (-1 if none)."""
+def previous_same_key(key_tab: np.ndarray, t_tab: np.ndarray, base: int, *,
+                      packed: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:  # fmt: skip
+    """For every row, the row before it in (key, time) order with the same key (-1 if none).
+
+    ``packed``: the table's :func:`packed_order`, when it is already at hand.
+    """
     key_tab = np.asarray(key_tab, np.int64)
-    packed = key_tab * _SPAN + np.clip(np.asarray(t_tab, np.int64) - base, 0, _SPAN - 1)
-    order = np.argsort(packed, kind="stable")
+    order = (packed or packed_order(key_tab, t_tab, base))[0]
     prev = np.full(key_tab.size, -1, np.int64)
     same = key_tab[order][1:] == key_tab[order][:-1]
     prev[order[1:][same]] = order[:-1][same]
@@ -71,22 +93,26 @@ def previous_same_key(key_tab: np.ndarray, t_tab: np.ndarray, base: int) -> np.n
 
 
 def earliest_within(
-    key_tab: np.ndarray, t_tab: np.ndarray, rows: np.ndarray, window_us: np.ndarray, base: int
+    key_tab: np.ndarray,
+    t_tab: np.ndarray,
+    rows: np.ndarray,
+    window_us: np.ndarray,
+    base: int,
+    *,
+    packed: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """For query rows of the table, the earliest earlier row of the same key less than ``window_us`` older.
 
     That is the previous row whose time difference is the largest one below the window (-1 if
     there is none, or for ``rows < 0``): the IODF = 3 rule of DO-229D A.4.4.3 with the window
-    I_fc / 2.
+    I_fc / 2. ``packed``: the table's :func:`packed_order`, when it is already at hand.
     """
     key_tab = np.asarray(key_tab, np.int64)
     t_tab = np.asarray(t_tab, np.int64)
     rows = np.asarray(rows, np.int64)
     if key_tab.size == 0:
         return np.full(rows.shape, -1, np.int64)
-    packed = key_tab * _SPAN + np.clip(t_tab - base, 0, _SPAN - 1)
-    order = np.argsort(packed, kind="stable")
-    sp = packed[order]
+    order, sp = packed or packed_order(key_tab, t_tab, base)
     r = np.maximum(rows, 0)
     lo = np.nan_to_num(t_tab[r] - np.asarray(window_us, float), nan=np.inf)
     lo = np.clip(lo, base, base + _SPAN - 1).astype(np.int64)

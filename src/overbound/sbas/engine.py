@@ -103,6 +103,7 @@ from overbound.sbas.corrections import (
     US,
     asof,
     earliest_within,
+    packed_order,
     previous_other_value,
     previous_same_key,
     segments,
@@ -111,7 +112,7 @@ from overbound.sbas.corrections import (
 from overbound.sbas.klobuchar import geomagnetic_latitude, klobuchar_delay, klobuchar_sigma2
 from overbound.sbas.messages import FC_TIMEOUT_NPA, FC_TIMEOUT_PA, SbasMessages
 from overbound.sbas.solution import K_H_NPA, K_H_PA, K_V_PA, weighted_least_squares
-from overbound.sbas.tropo import mops_tropo
+from overbound.sbas.tropo import mapping, zenith_delays
 
 __all__ = ["IONO_MODE_KLOBUCHAR", "REASONS", "SbasOptions", "SbasResult", "run_sbas"]
 
@@ -211,9 +212,13 @@ def run_sbas(
     correction (DO-229D J.2.3); None: no fall-back, and ``counts["klobuchar"]`` says so.
     """
     opt = options or SbasOptions()
-    obs = obs.filter(pl.col("system") == "G").sort("time", "prn")
+    obs = obs.filter(pl.col("system") == "G")
     t = times_us(obs["time"])
     prn = obs["prn"].to_numpy().astype(np.int64)
+    if not _in_order(t, prn):  # a RINEX table usually is: no sort
+        obs = obs.sort("time", "prn")
+        t = times_us(obs["time"])
+        prn = obs["prn"].to_numpy().astype(np.int64)
     pr = obs["C1C"].to_numpy().astype(float)
     new_epoch = np.ones(t.size, bool)  # rows are sorted by time: an epoch starts where t changes
     new_epoch[1:] = t[1:] != t[:-1]
@@ -240,9 +245,9 @@ def run_sbas(
     flag((mt10 < 0) & pa, "no_mt10")
     flag(mt10_out & pa, "mt10_timeout")
     no_mt10 = (mt10 < 0) | mt10_out  # NPA only from here on: sigma_flt with the 8 m term, no degradation
-    deg = {c: _take(m.degradation[c].to_numpy().astype(float), np.where(no_mt10, -1, mt10))
+    r10 = np.where(no_mt10, -1, mt10)  # NaN (absent terms) and the fill of no MT 10 read as 0
+    deg = {c: np.nan_to_num(_with_fill(m.degradation[c].to_numpy().astype(float)))[r10]
            for c in m.degradation.columns[2:]}  # fmt: skip
-    deg = {c: np.nan_to_num(v) for c, v in deg.items()}
     fast = _fast(ctx, m, mask, seg_epoch, deg)
     for name, cond in fast.pop("flags"):
         flag(cond, name)
@@ -264,8 +269,10 @@ def run_sbas(
     flag((grid["fail"] == ionomod.FAIL_NO_CELL) & keep, "no_igp_cell")
     flag((grid["fail"] == ionomod.FAIL_OUTSIDE) & keep, "iono_outside_triangle")
     flag(~grid["ok"] & keep, "no_iono")
-    doy = _day_of_year(t)
-    tropo, sig_tropo = mops_tropo(lat, h, doy, geom["elev"])
+    # the zenith delays change with the day only: per epoch, then per row (mops_tropo's numbers)
+    z_hyd, z_wet = zenith_delays(lat, h, _day_of_year(epochs_us))
+    m_tropo = mapping(geom["elev"])
+    tropo, sig_tropo = (z_hyd + z_wet)[epoch] * m_tropo, 0.12 * m_tropo
 
     # --- variances (DO-229D A.4.5, J.2.4) ---------------------------------------------------------
     s_udre = np.sqrt(fast["sigma2_udre"]) * dudre
@@ -363,11 +370,13 @@ class _Context:
     base: int
     epoch: np.ndarray  # epoch index per row
     epochs_us: np.ndarray  # time of each epoch (us)
+    t_avail: np.ndarray = field(init=False)  # latest tag usable at each row's epoch: tag + flight <= t
+    ep_avail: np.ndarray = field(init=False)  # the same per epoch
 
-    @property
-    def t_avail(self) -> np.ndarray:
-        """Latest message tag usable at each row's epoch: tag + flight <= t."""
-        return self.t - round(self.opt.flight_time * US)
+    def __post_init__(self) -> None:
+        flight = round(self.opt.flight_time * US)
+        self.t_avail = self.t - flight
+        self.ep_avail = self.epochs_us - flight
 
     def timeout(self, mt: int) -> float:
         return (TIMEOUT_PA if self.opt.mode == "PA" else TIMEOUT_NPA)[mt]
@@ -381,15 +390,40 @@ class _Context:
 
 
 def _take(values: np.ndarray, rows: np.ndarray, fill: float = np.nan) -> np.ndarray:
-    """``values[rows]`` with ``fill`` where rows < 0."""
-    if values.size == 0:
-        return np.full(rows.shape, fill, dtype=float if isinstance(fill, float) else np.int64)
-    neg = rows < 0
-    some = bool(neg.any())  # often none: skip the clamp and the fill
-    out = values[np.maximum(rows, 0) if some else rows]
-    if out.dtype.kind in "iub":  # signed 64-bit (or float) so that differences and fills do not wrap
-        out = out.astype(float if isinstance(fill, float) else np.int64)
-    return np.where(neg, fill, out) if some else out
+    """``values[rows]`` with ``fill`` where rows is -1 (the "none" of every look-up here; rows >= -1).
+
+    Integers and booleans come out as float with a float ``fill``, else as int64, so that differences and
+    fills do not wrap. One gather from the table with ``fill`` appended (:func:`_with_fill`).
+    """
+    return _with_fill(values, fill)[rows]
+
+
+def _with_fill(values: np.ndarray, fill: float = np.nan) -> np.ndarray:
+    """``values`` with ``fill`` appended, so that row -1 picks it, in the dtype :func:`_take` gives."""
+    values = np.asarray(values)
+    if values.dtype.kind in "iub" or values.size == 0:
+        dtype = np.dtype(float if isinstance(fill, float) else np.int64)
+    else:
+        dtype = values.dtype
+    out = np.empty(values.size + 1, dtype)
+    out[:-1] = values
+    out[-1] = fill
+    return out
+
+
+def _in_order(t: np.ndarray, prn: np.ndarray) -> bool:
+    """Whether the rows are strictly in (time, PRN) order (the order a sort on both gives, ties excluded)."""
+    dt = t[1:] - t[:-1]
+    return bool(((dt > 0) | ((dt == 0) & (prn[1:] > prn[:-1]))).all())
+
+
+def _sum_corners(p: np.ndarray) -> np.ndarray:
+    """``p.sum(axis=1)`` of an (n, 4) array, bit for bit (numpy sums four terms in order from 0: 0 + p0 + p1
+    + p2 + p3), by columns: the reduction's per-row overhead is most of its cost on four terms."""
+    out = 0.0 + p[:, 0]
+    for k in range(1, p.shape[1]):
+        out += p[:, k]
+    return out
 
 
 def _ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -414,9 +448,11 @@ def _latest(ctx: _Context, table: pl.DataFrame, mt: int, key: np.ndarray | None 
             key_tab: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
     """Last row of ``table`` available at each epoch (per key when given)."""
     tt = times_us(table["time"])
+    if key is None:  # the same for every row of an epoch: searched per epoch
+        zero = np.zeros(tt.size, np.int64)
+        return asof(zero, tt, np.zeros(ctx.ep_avail.size, np.int64), ctx.ep_avail, ctx.base)[ctx.epoch]
     kt = np.zeros(tt.size, np.int64) if key_tab is None else key_tab
-    kq = np.zeros(ctx.t.size, np.int64) if key is None else key
-    return asof(kt, tt, kq, ctx.t_avail, ctx.base)
+    return asof(kt, tt, key, ctx.t_avail, ctx.base)
 
 
 def _message_loss(ctx: _Context, m: SbasMessages) -> tuple[np.ndarray, np.ndarray]:
@@ -442,10 +478,19 @@ def _mask_state(ctx: _Context, m: SbasMessages) -> _Mask:
     msg_t = m.mask["time"].unique(maintain_order=True)
     msg_tab = pl.DataFrame({"time": msg_t})
     row = _latest(ctx, msg_tab, 1)
-    t_mask = _take(times_us(msg_t), row, fill=0).astype(np.int64)
+    t_mask = _take(times_us(msg_t), row, fill=0)
     gps = m.mask.filter(pl.col("system") == "GPS")
-    r = _latest(ctx, gps, 1, key=ctx.prn, key_tab=gps["sv"].to_numpy().astype(np.int64))
-    in_mask = (r >= 0) & (_take(times_us(gps["time"]), r, fill=0) == t_mask)
+    # a satellite is in the mask in force if the latest message holds it: its GPS row per (message, PRN),
+    # the last one in table order, with a last row of none for "no message"
+    msg_us = times_us(msg_t)
+    sorter = np.argsort(msg_us)
+    msg_of_row = sorter[np.searchsorted(msg_us, times_us(gps["time"]), sorter=sorter)]
+    sv = gps["sv"].to_numpy().astype(np.int64)
+    width = max(int(sv.max(initial=0)), int(ctx.prn.max(initial=0))) + 1
+    rows_by_msg = np.full((msg_us.size + 1, width), -1, np.int64)
+    np.maximum.at(rows_by_msg, (msg_of_row, sv), np.arange(sv.size))
+    r = rows_by_msg.ravel()[np.where(row >= 0, row, msg_us.size) * width + ctx.prn]
+    in_mask = r >= 0
     n_per_msg = m.mask.group_by("time", maintain_order=True).len()["len"].to_numpy()
     flags = [
         ("no_mask", row < 0),
@@ -453,9 +498,9 @@ def _mask_state(ctx: _Context, m: SbasMessages) -> _Mask:
         ("not_in_mask", (row >= 0) & ~in_mask),
     ]
     return _Mask(
-        iodp=np.where(in_mask, _take(gps["iodp"].to_numpy(), r, fill=0), -1).astype(np.int64),
-        position=np.where(in_mask, _take(gps["position"].to_numpy(), r, fill=0), 0).astype(np.int64),
-        n_sats=_take(n_per_msg, row, fill=0).astype(np.int64),
+        iodp=np.where(in_mask, _take(gps["iodp"].to_numpy(), r, fill=0), -1),
+        position=np.where(in_mask, _take(gps["position"].to_numpy(), r, fill=0), 0),
+        n_sats=_take(n_per_msg, row, fill=0),
         flags=flags,
     )
 
@@ -473,18 +518,21 @@ def _fast(ctx: _Context, m: SbasMessages, mask: _Mask, seg_epoch: np.ndarray, de
     tf = times_us(f["time"])
     fkey = (_segment_of(tf, m) * 4 + f["iodp"].to_numpy()) * 64 + f["position"].to_numpy()
     qkey = (seg_epoch * 4 + mask.iodp) * 64 + mask.position
-    r = asof(fkey, tf, qkey, ctx.t_avail, ctx.base)
+    fsort = packed_order(fkey, tf, ctx.base)  # the table is large: sorted once for its three look-ups
+    r = asof(fkey, tf, qkey, ctx.t_avail, ctx.base, packed=fsort)
     r = np.where(mask.iodp >= 0, r, -1)
-    prev = _take(previous_same_key(fkey, tf, ctx.base), r, fill=-1).astype(np.int64)
+    prev = _take(previous_same_key(fkey, tf, ctx.base, packed=fsort), r, fill=-1)
     udrei_f = _take(f["udrei"].to_numpy(), r, fill=-1)
-    tag_f = _take(tf, r, fill=0).astype(np.int64)
-    iodf_f = _take(f["iodf"].to_numpy(), r, fill=-1)
+    tf_0 = _with_fill(tf, 0)
+    tag_f = tf_0[r]
+    iodf_tab = f["iodf"].to_numpy()
+    iodf_f = _take(iodf_tab, r, fill=-1)
     # MT 6: the latest one, if newer than the fast correction and its IODF matches (or is 3)
     i6 = m.integrity
     t6 = times_us(i6["time"])
     r6 = asof(_segment_of(t6, m) * 64 + i6["position"].to_numpy(), t6, seg_epoch * 64 + mask.position,
               ctx.t_avail, ctx.base)  # fmt: skip
-    tag6 = _take(t6, r6, fill=0).astype(np.int64)
+    tag6 = _take(t6, r6, fill=0)
     iodf6 = _take(i6["iodf"].to_numpy(), r6, fill=-1)
     newer6 = (r6 >= 0) & (r >= 0) & (tag6 > tag_f)
     match6 = newer6 & ((iodf6 == 3) | (iodf6 == iodf_f))
@@ -497,7 +545,7 @@ def _fast(ctx: _Context, m: SbasMessages, mask: _Mask, seg_epoch: np.ndarray, de
     t7 = times_us(f7["time"])
     r7 = asof(f7["iodp"].to_numpy() * 64 + f7["position"].to_numpy(), t7, mask.iodp * 64 + mask.position,
               ctx.t_avail, ctx.base)  # fmt: skip
-    ai_index = _take(f7["ai_index"].to_numpy(), r7, fill=0).astype(int)
+    ai_index = _take(f7["ai_index"].to_numpy(), r7, fill=0)
     ai = _take(f7["ai"].to_numpy(), r7)
     tlat = _take(f7["tlat"].to_numpy(), r7)
     fc_tmout = np.asarray(FC_TIMEOUT_PA if pa else FC_TIMEOUT_NPA, float)
@@ -505,21 +553,21 @@ def _fast(ctx: _Context, m: SbasMessages, mask: _Mask, seg_epoch: np.ndarray, de
     tmin = _smallest_timeout(f7, r7, mask.n_sats, fc_tmout)
     # RRC from the last two PRCs; with an alarm (IODF 3) in the current or previous one, from the
     # previous PRC closest to I_fc / 2 before the current one (DO-229D A.4.4.3, A.4.5.1.2)
-    iodf_tab = f["iodf"].to_numpy()
-    alarm = (iodf_f == 3) | (newer6 & (iodf6 == 3)) | (_take(iodf_tab, prev, fill=-9) == 3)
-    prev_a = prev  # the search sorts the whole table: only when some row has an alarm
+    iodf_9 = _with_fill(iodf_tab, -9)
+    alarm = (iodf_f == 3) | (newer6 & (iodf6 == 3)) | (iodf_9[prev] == 3)
+    prev_a = prev  # the search: only when some row has an alarm
     if alarm.any():
-        prev_a = earliest_within(fkey, tf, np.where(alarm, r, -1), tmin * US / 2, ctx.base)
-    dt_prev = (tag_f - _take(tf, prev, fill=0)) / US
+        prev_a = earliest_within(fkey, tf, np.where(alarm, r, -1), tmin * US / 2, ctx.base, packed=fsort)
+    dt_prev = (tag_f - tf_0[prev]) / US
     prev_a = np.where(prev_a >= 0, prev_a, np.where(dt_prev <= tmin, prev, -1))
     prev = np.where(alarm, prev_a, prev)
-    prc = _take(f["prc"].to_numpy(), r)
-    prc_prev = _take(f["prc"].to_numpy(), prev)
-    dt = (tag_f - _take(tf, prev, fill=0)) / US
+    prc_tab = _with_fill(f["prc"].to_numpy())
+    prc, prc_prev = prc_tab[r], prc_tab[prev]
+    dt = (tag_f - tf_0[prev]) / US
     have2 = (prev >= 0) & (_take(f["udrei"].to_numpy(), prev, fill=15) < 14)
     t_of = (ctx.t - tag_f) / US + 1.0  # t - t_of, t_of = tag - 1 s
     rrc = np.where(have2 & (ai > 0), (prc - prc_prev) / np.where(dt > 0, dt, np.nan), 0.0)
-    in_seq = np.mod(iodf_f - _take(iodf_tab, prev, fill=-9), 3) == 1
+    in_seq = np.mod(iodf_f - iodf_9[prev], 3) == 1
     brrc_dt = np.divide(deg["brrc"], dt, out=np.full(dt.shape, np.inf), where=dt > 0)
     off_half = np.abs(dt - tmin / 2)
     eps_rrc = np.where(alarm, np.where(off_half == 0, 0.0, (ai * off_half / 2 + brrc_dt) * t_of),
@@ -593,7 +641,7 @@ def _delta_udre(ctx: _Context, m: SbasMessages, mask: _Mask, lat: float, lon: fl
     if s.height:
         v_set, t_set = _service_sets(s, m.service_regions, lat, lon)
         v = _take(v_set, r27)
-        t_old = _take(t_set, r27, fill=0).astype(np.int64)
+        t_old = _take(t_set, r27, fill=0)
         incomplete = use27 & ~np.isfinite(v)
         timed_out = use27 & ~incomplete & (ctx.age(t_old) > ctx.timeout(27))
         value = np.where(use27 & ~incomplete & ~timed_out, v, 1.0)
@@ -715,25 +763,27 @@ def _long_term(ctx: _Context, m: SbasMessages, mask: _Mask, deg: dict, eph: pl.D
     r = asof(key, tl, mask.iodp * 64 + mask.position, ctx.t_avail, ctx.base)
     r = np.where(mask.iodp >= 0, r, -1)
     timed_out = (r >= 0) & ctx.timed_out(lt, r, 25)
-    row_cur = _ephemeris_rows(ctx, eph, _take(iode_tab, r, fill=-1).astype(np.int64))
-    prev = _take(previous_other_value(key, iode_tab, tl, ctx.base), r, fill=-1).astype(np.int64)
+    iode_1 = _with_fill(iode_tab, -1)
+    row_cur = _ephemeris_rows(ctx, eph, iode_1[r])
+    prev = _take(previous_other_value(key, iode_tab, tl, ctx.base), r, fill=-1)
     prev = np.where((r >= 0) & ~timed_out & (row_cur < 0) & (prev >= 0), prev, -1)
     prev = np.where((prev >= 0) & ~ctx.timed_out(lt, prev, 25), prev, -1)
-    row_prev = _ephemeris_rows(ctx, eph, _take(iode_tab, prev, fill=-1).astype(np.int64))
+    row_prev = _ephemeris_rows(ctx, eph, iode_1[prev])
     use_prev = (prev >= 0) & (row_prev >= 0)
     r = np.where(use_prev, prev, r)
     names = ("dx", "dy", "dz", "daf0", "ddx", "ddy", "ddz", "daf1", "velocity_code")
     get = {c: _take(lt[c].to_numpy().astype(float), r) for c in names}
     t0 = _take(times_us(lt["t0"].fill_null(lt["time"])), r, fill=0)
     dt0 = np.where(get["velocity_code"] == 1, (ctx.t - t0) / US, 0.0)
-    age_tx = (ctx.t - _take(tl, r, fill=0)) / US + 1.0  # t - t_ltc, t_ltc = tag - 1 s
+    tag = _take(tl, r, fill=0)
+    age_tx = (ctx.t - tag) / US + 1.0  # t - t_ltc, t_ltc = tag - 1 s
     v0 = deg["cltc_v0"] * np.floor(_ratio(age_tx, deg["iltc_v0"]))
     outside = np.maximum(0.0, np.maximum(-dt0, dt0 - deg["iltc_v1"]))
     v1 = np.where(outside > 0, deg["cltc_lsb"] + deg["cltc_v1"] * outside, 0.0)
     flags = [("no_long_term", r < 0), ("long_term_timeout", timed_out)]
     return {
-        "pa_timed_out": (r >= 0) & (ctx.age(_take(tl, r, fill=0)) > TIMEOUT_PA[25]),
-        "iode": _take(iode_tab, r, fill=-1).astype(np.int64),
+        "pa_timed_out": (r >= 0) & (ctx.age(tag) > TIMEOUT_PA[25]),
+        "iode": iode_1[r],
         "eph_row": np.where(use_prev, row_prev, row_cur),
         "previous_iode": use_prev,
         "dx": get["dx"] + get["ddx"] * dt0,
@@ -765,11 +815,15 @@ def _geometry(ctx: _Context, eph: pl.DataFrame, pr: np.ndarray, ltc: dict, rx: n
     pos = st.position + np.stack([ltc["dx"][i], ltc["dy"][i], ltc["dz"][i]], axis=-1)
     # the light time from the position at transmission (one evaluation: the position does not change)
     rot = rotate_earth(pos, _distance(pos, rx) / C)
-    rho = _distance(rot, rx)
+    d = [rot[:, k] - rx[k] for k in range(3)]  # receiver to satellite
+    rho = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
     e, nn, u = pymap3d.ecef2enu(rot[:, 0], rot[:, 1], rot[:, 2], lat, lon,
                                 float(pymap3d.ecef2geodetic(*rx)[2]))  # fmt: skip
     out["rho"][i] = rho
-    out["los"][i] = (rot - rx) / rho[:, None]
+    los = np.empty((i.size, 3))
+    for k in range(3):
+        np.divide(d[k], rho, out=los[:, k])
+    out["los"][i] = los
     clock = st.clock
     if ctx.opt.relativity == "rv":  # -2 r.v / c^2 from the orbit itself (gLAB's choice)
         h = 1e-3
@@ -796,15 +850,19 @@ def _ephemeris_rows(ctx: _Context, eph: pl.DataFrame, iode: np.ndarray) -> np.nd
     often later than the SBAS started correcting that IODE (PRN 7, IODE 89 on the EGNOS day:
     corrected from 08:03, logged 08:43). gLAB does not check it either.
     """
+    out = np.full(iode.size, -1, np.int64)
+    q = np.flatnonzero(iode >= 0)  # only rows with a correction's IODE (few for the previous IODE)
     toe = times_us(eph["toe_time"])
     fit = eph["fit_interval"].to_numpy()
     half = (np.where(fit > 1, fit, 4.0) * 1800 * US).astype(np.int64)
     key = eph["prn"].to_numpy().astype(np.int64) * 1024 + eph["iode"].to_numpy().astype(np.int64)
     healthy = eph["health"].to_numpy() == 0
-    r = asof(key[healthy], (toe - half)[healthy], ctx.prn * 1024 + iode, ctx.t, ctx.base)
-    r = np.where(r >= 0, np.flatnonzero(healthy)[np.maximum(r, 0)], -1)
-    fits = np.abs(ctx.t - _take(toe, r, fill=0)) <= _take(half, r, fill=0)
-    return np.where((iode >= 0) & (r >= 0) & fits, r, -1)
+    t = ctx.t[q]
+    r = asof(key[healthy], (toe - half)[healthy], ctx.prn[q] * 1024 + iode[q], t, ctx.base)
+    r = _take(np.flatnonzero(healthy), r, fill=-1)
+    fits = np.abs(t - _take(toe, r, fill=0)) <= _take(half, r, fill=0)
+    out[q] = np.where((r >= 0) & fits, r, -1)
+    return out
 
 
 def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, deg: dict) -> dict:
@@ -821,7 +879,6 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
     g = m.iono.join(where, on=("band", "iodi", "igp"), how="inner").drop_nulls(("lat", "lon"))
     tg = times_us(g["time"])
     gkey = ionomod.igp_key(g["lat"].to_numpy(), g["lon"].to_numpy())
-    t_av = ctx.t_avail
     sel = geom["elev"] > 0
     idx = np.flatnonzero(sel)
     flight_us = round(ctx.opt.flight_time * US)
@@ -835,8 +892,10 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
     ep_t, ep = ctx.epochs_us - flight_us, ctx.epoch  # the same t_avail for every row of an epoch
     # IODI per (band, epoch), -2 where no MT 18 of the band; a last row of -2 for bands not in the mask
     iodi_ep = np.full((bands.size + 1, ep_t.size), -2, np.int64)
+    mk_sort = packed_order(band_key, tmk, ctx.base)  # one sort for the look-ups of every band
     for i_b, b in enumerate(bands.tolist()):
-        iodi_ep[i_b] = _band_iodi(mk, band_key, tmk, np.full(ep_t.size, b, np.int64), ep_t, ctx.base)
+        iodi_ep[i_b] = _band_iodi(mk, band_key, tmk, np.full(ep_t.size, b, np.int64), ep_t, ctx.base,
+                                  packed=mk_sort)  # fmt: skip
     change = np.ones(ep_t.size, bool)  # a new mask version where any band's IODI changes
     change[1:] = (iodi_ep[:, 1:] != iodi_ep[:, :-1]).any(axis=0)
     version_ep = np.cumsum(change) - 1
@@ -848,8 +907,10 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
             if iodi_b >= 0:
                 in_version[v] |= np.isin(_mask_code(b, iodi_b, all_keys), member)
 
+    ep_idx = ep[idx]  # epoch of each pierce point
+
     def in_mask(rows: np.ndarray, key: np.ndarray) -> np.ndarray:
-        return in_version[version_ep[ep[idx[rows]]][:, None], key]
+        return in_version.ravel()[(version_ep[ep_idx[rows]] * ionomod.N_IGP_KEYS)[:, None] + key]
 
     g_band = g["band"].to_numpy().astype(np.int64)
     pos_b = np.searchsorted(bands, g_band)  # row of iodi_ep of each grid value's band
@@ -877,7 +938,7 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
     found_r: dict[str, np.ndarray] = {}
 
     def status(rows: np.ndarray, key: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        cell = cells.cell(state_ep[ep[idx[rows]]], key)
+        cell = cells.cell(state_ep[ep_idx[rows]], key)
         r = value.ravel()[cell]
         found_r["rows"], found_r["r"] = rows, r  # kept for the interpolation below
         fl = flags.ravel()[cell]
@@ -890,16 +951,16 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
     # only pierce points with a cell can have a correction (ok_sub False elsewhere): the grid values
     # are those of status()'s look-up
     f, r = found_r.get("rows", np.zeros(0, np.int64)), found_r.get("r", np.zeros((0, 4), np.int64))
-    tq = t_av[idx[f]][:, None]
+    rows_f, w_f = idx[f], w[f]
     givd = np.nan_to_num(np.append(g["givd"].to_numpy(), np.nan))[r]
     s2give = np.nan_to_num(np.append(g["sigma2_give"].to_numpy(), np.nan))[r]
-    t_iono = (tq + flight_us - tag_g[r]) / US + 1.0  # t - (tag - 1)
-    d = {k2: deg[k2][idx[f]][:, None] for k2 in ("ciono_step", "iiono", "ciono_ramp", "rss_iono")}
+    t_iono = (ctx.t[rows_f][:, None] - tag_g[r]) / US + 1.0  # t - (tag - 1)
+    d = {k2: deg[k2][rows_f][:, None] for k2 in ("ciono_step", "iiono", "ciono_ramp", "rss_iono")}
     eps = d["ciono_step"] * np.floor(_ratio(t_iono, d["iiono"])) + d["ciono_ramp"] * t_iono
     s2grid = np.where(d["rss_iono"] > 0, s2give + eps**2, (np.sqrt(s2give) + eps) ** 2)
     vert, s2uive = np.zeros(idx.size), np.zeros(idx.size)
-    vert[f] = (w[f] * givd).sum(axis=1)
-    s2uive[f] = (w[f] * s2grid).sum(axis=1)
+    vert[f] = _sum_corners(w_f * givd)
+    s2uive[f] = _sum_corners(w_f * s2grid)
     ok = np.zeros(n, bool)
     ok[idx] = ok_sub
     mode = np.full(n, -1)
@@ -911,7 +972,7 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
     s2uire = np.full(n, np.nan)
     s2uire[idx] = np.where(ok_sub, fpp[idx] ** 2 * s2uive, np.nan)
     # mask time-out: the latest MT 18 of any band older than its time-out
-    last18 = asof(np.zeros(tmk.size, np.int64), tmk, np.zeros(n, np.int64), t_av, ctx.base)
+    last18 = _latest(ctx, mk, 18)
     mask_to = (last18 >= 0) & (ctx.age(_take(tmk, last18, fill=0)) > ctx.timeout(18))
     return {"ok": ok, "mode": mode, "fail": fail, "slant": slant, "sigma2_uire": s2uire, "fpp": fpp,
             "mask_timeout": mask_to,
@@ -991,9 +1052,9 @@ def _largest_age_us(timeout: float, flight: float) -> int:
 
 
 def _band_iodi(mk: pl.DataFrame, band_key: np.ndarray, tmk: np.ndarray, band_q: np.ndarray, t_q: np.ndarray,
-               base: int) -> np.ndarray:  # fmt: skip
-    """IODI of the latest MT 18 of each queried band."""
-    r = asof(band_key, tmk, band_q.ravel(), t_q.ravel(), base).reshape(band_q.shape)
+               base: int, packed: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:  # fmt: skip
+    """IODI of the latest MT 18 of each queried band (``packed``: :func:`packed_order` of the mask table)."""
+    r = asof(band_key, tmk, band_q.ravel(), t_q.ravel(), base, packed=packed).reshape(band_q.shape)
     return _take(mk["iodi"].to_numpy(), r, fill=-2)
 
 
