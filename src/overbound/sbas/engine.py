@@ -223,6 +223,7 @@ def run_sbas(
     new_epoch = np.ones(t.size, bool)  # rows are sorted by time: an epoch starts where t changes
     new_epoch[1:] = t[1:] != t[:-1]
     epochs_us, epoch = t[new_epoch], np.cumsum(new_epoch) - 1
+    del new_epoch
     m = _select_geo(msgs, opt.geo)
     rx = np.asarray(reference_ecef, float)
     lat, lon, h = (float(v) for v in pymap3d.ecef2geodetic(*rx))
@@ -246,44 +247,57 @@ def run_sbas(
     flag(mt10_out & pa, "mt10_timeout")
     no_mt10 = (mt10 < 0) | mt10_out  # NPA only from here on: sigma_flt with the 8 m term, no degradation
     r10 = np.where(no_mt10, -1, mt10)  # NaN (absent terms) and the fill of no MT 10 read as 0
-    deg = {c: np.nan_to_num(_with_fill(m.degradation[c].to_numpy().astype(float)))[r10]
-           for c in m.degradation.columns[2:]}  # fmt: skip
+    deg = _Degradation(m.degradation, r10)
+    del mt10, mt10_out, r10
+    # Intermediates are dropped (del, pop) once consumed: a day at 1 Hz is ~850,000 rows, 6.8 MB per
+    # float column, and the peak memory is what is alive when the geometry and the grid are computed.
     fast = _fast(ctx, m, mask, seg_epoch, deg)
+    del seg_epoch, lost
     for name, cond in fast.pop("flags"):
         flag(cond, name)
     du = _delta_udre(ctx, m, mask, lat, lon)
     for name, cond in du["flags"]:
         flag(cond & pa, name)
     ltc = _long_term(ctx, m, mask, deg, eph)
+    del mask
     for name, cond in ltc.pop("flags"):
         flag(cond, name)
     geom = _geometry(ctx, eph, pr, ltc, rx, lat, lon)
-    flag(geom["row"] < 0, "no_ephemeris_iode")
-    dudre = np.where(du["cov_row"] >= 0, _covariance_delta(m.covariance, du["cov_row"], geom["los"],
-                                                            deg["ccovariance"]), du["value"])  # fmt: skip
+    del ltc["eph_row"]
+    flag(geom.pop("row") < 0, "no_ephemeris_iode")
+    cov_row = du.pop("cov_row")
+    dudre = np.where(cov_row >= 0, _covariance_delta(m.covariance, cov_row, geom.pop("los"),
+                                                      deg["ccovariance"]), du.pop("value"))  # fmt: skip
+    del cov_row
+    # the range model's first terms, in the order of the sum below (the clock terms are not needed after)
+    model = geom["rho"] - C * geom.pop("clock") + C * geom.pop("tgd")
     flag(geom["elev"] < np.deg2rad(opt.mask_deg), "elevation")
     grid = _iono(ctx, m, geom, lat, lon, deg)
     broadcast = _klobuchar_fallback(ctx, geom, grid, lat, lon, klobuchar) if not pa else None
     keep = np.ones(t.size, bool) if broadcast is None else ~broadcast  # rows the fall-back saves
-    flag(grid["mask_timeout"] & keep, "iono_mask_timeout")
-    flag((grid["fail"] == ionomod.FAIL_NO_CELL) & keep, "no_igp_cell")
-    flag((grid["fail"] == ionomod.FAIL_OUTSIDE) & keep, "iono_outside_triangle")
-    flag(~grid["ok"] & keep, "no_iono")
+    flag(grid.pop("mask_timeout") & keep, "iono_mask_timeout")
+    fail = grid.pop("fail")
+    flag((fail == ionomod.FAIL_NO_CELL) & keep, "no_igp_cell")
+    flag((fail == ionomod.FAIL_OUTSIDE) & keep, "iono_outside_triangle")
+    flag(~grid.pop("ok") & keep, "no_iono")
+    del fail, keep
     # the zenith delays change with the day only: per epoch, then per row (mops_tropo's numbers)
     z_hyd, z_wet = zenith_delays(lat, h, _day_of_year(epochs_us))
     m_tropo = mapping(geom["elev"])
     tropo, sig_tropo = (z_hyd + z_wet)[epoch] * m_tropo, 0.12 * m_tropo
 
     # --- variances (DO-229D A.4.5, J.2.4) ---------------------------------------------------------
-    s_udre = np.sqrt(fast["sigma2_udre"]) * dudre
-    eps_fc = np.where(no_mt10, 0.0, fast["eps_fc"])
-    eps_rrc = np.where(no_mt10, 0.0, fast["eps_rrc"])
+    sigma_udre = np.sqrt(fast.pop("sigma2_udre"))
+    s_udre = sigma_udre * dudre
+    eps_fc = np.where(no_mt10, 0.0, fast.pop("eps_fc"))
+    eps_rrc = np.where(no_mt10, 0.0, fast.pop("eps_rrc"))
     eps_er = _eps_er(ctx, fast, ltc, du, deg)
     eps = eps_fc + eps_rrc + ltc["eps_ltc"] + eps_er
     rss = deg["rss_udre"] > 0
     sig2_flt = np.where(rss, s_udre**2 + eps_fc**2 + eps_rrc**2 + ltc["eps_ltc"] ** 2 + eps_er**2,
                         (s_udre + eps) ** 2)  # fmt: skip
     sig2_flt = np.where(no_mt10, (s_udre + SIGMA_FLT_NO_MT10) ** 2, sig2_flt)  # A.4.5.1, NPA only
+    del s_udre, eps, rss
     elev_deg = np.rad2deg(geom["elev"])
     s_noise = 0.36 if opt.aad == "A" else 0.15
     s_mp = 0.13 + 0.53 * np.exp(-elev_deg / 10.0)
@@ -291,8 +305,10 @@ def run_sbas(
     sig2 = sig2_flt + grid["sigma2_uire"] + sig2_air + sig_tropo**2
 
     # --- corrected range and solution ----------------------------------------------------------------
-    model = geom["rho"] - C * geom["clock"] + C * geom["tgd"] + grid["slant"] + tropo
+    model += grid["slant"]
+    model += tropo
     prefit = pr + fast["prc"] + fast["rrc_corr"] - model
+    del model
     used = reason == 0
     k_h = K_H_PA if pa else K_H_NPA
     sol = weighted_least_squares(epoch, epochs_us.size, geom["elev"], geom["azim"], prefit, sig2, used,
@@ -327,7 +343,7 @@ def run_sbas(
             "rrc": fast["rrc"],
             "rrc_corr": fast["rrc_corr"],
             "udrei": fast["udrei"],
-            "sigma_udre": np.sqrt(fast["sigma2_udre"]),
+            "sigma_udre": sigma_udre,
             "delta_udre": dudre,
             "ai": fast["ai"],
             "eps_fc": eps_fc,
@@ -417,15 +433,6 @@ def _in_order(t: np.ndarray, prn: np.ndarray) -> bool:
     return bool(((dt > 0) | ((dt == 0) & (prn[1:] > prn[:-1]))).all())
 
 
-def _sum_corners(p: np.ndarray) -> np.ndarray:
-    """``p.sum(axis=1)`` of an (n, 4) array, bit for bit (numpy sums four terms in order from 0: 0 + p0 + p1
-    + p2 + p3), by columns: the reduction's per-row overhead is most of its cost on four terms."""
-    out = 0.0 + p[:, 0]
-    for k in range(1, p.shape[1]):
-        out += p[:, k]
-    return out
-
-
 def _ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """a / b, 0 where b is 0 (an MT 10 interval that is absent: its degradation term is 0)."""
     a, b = np.broadcast_arrays(np.asarray(a, float), np.asarray(b, float))
@@ -511,7 +518,7 @@ def _segment_of(tags: np.ndarray, m: SbasMessages) -> np.ndarray:
     return seg[np.clip(np.searchsorted(log_t, tags, side="right") - 1, 0, None)]
 
 
-def _fast(ctx: _Context, m: SbasMessages, mask: _Mask, seg_epoch: np.ndarray, deg: dict) -> dict:
+def _fast(ctx: _Context, m: SbasMessages, mask: _Mask, seg_epoch: np.ndarray, deg: _Degradation) -> dict:
     """Fast corrections, RRC, UDRE and their degradation (DO-229D A.4.4.3-5, A.4.5.1)."""
     pa = ctx.opt.mode == "PA"
     f = m.fast
@@ -595,7 +602,7 @@ def _fast(ctx: _Context, m: SbasMessages, mask: _Mask, seg_epoch: np.ndarray, de
     }  # fmt: skip
 
 
-def _eps_er(ctx: _Context, fast: dict, ltc: dict, du: dict, deg: dict) -> np.ndarray:
+def _eps_er(ctx: _Context, fast: dict, ltc: dict, du: dict, deg: _Degradation) -> np.ndarray:
     """En-route degradation eps_er (DO-229D A.4.5.1.4): C_er (MT 10) in NPA once the fast, the
     long-term or the MT 28 correction has outlived its PA/APV time-out (Table A-8, A-25; for MT 28
     gLAB compares with the MT 25 one, the same 240 s) but not its NPA one; 0 in PA, where such a
@@ -603,6 +610,27 @@ def _eps_er(ctx: _Context, fast: dict, ltc: dict, du: dict, deg: dict) -> np.nda
     if ctx.opt.mode == "PA":
         return np.zeros(ctx.t.size)
     return np.where(fast["pa_timed_out"] | ltc["pa_timed_out"] | du["pa_timed_out"], deg["cer"], 0.0)
+
+
+class _Degradation:
+    """The MT 10 parameters in force per row, gathered when asked for (``deg[name]``, a new (n,) array).
+
+    NaN (absent terms) and rows without MT 10 (``rows`` -1) read as 0. Sixteen parameters held as
+    full columns would be ~110 MB for a day at 1 Hz, alive through the whole engine; the tables
+    are a few hundred rows.
+    """
+
+    def __init__(self, table: pl.DataFrame, rows: np.ndarray) -> None:
+        self._values = {c: np.nan_to_num(_with_fill(table[c].to_numpy().astype(float)))
+                        for c in table.columns[2:]}  # fmt: skip
+        self._rows = rows
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        return self._values[name][self._rows]
+
+    def at(self, name: str, rows: np.ndarray) -> np.ndarray:
+        """``self[name][rows]`` without the full column."""
+        return self._values[name][self._rows[rows]]
 
 
 def _smallest_timeout(
@@ -746,7 +774,7 @@ def _covariance_delta(cov: pl.DataFrame, row: np.ndarray, los: np.ndarray, ccov:
     return out
 
 
-def _long_term(ctx: _Context, m: SbasMessages, mask: _Mask, deg: dict, eph: pl.DataFrame) -> dict:
+def _long_term(ctx: _Context, m: SbasMessages, mask: _Mask, deg: _Degradation, eph: pl.DataFrame) -> dict:
     """Long-term corrections (MT 25), their broadcast ephemeris and eps_ltc (DO-229D A.4.4.7, A.4.5.1.3).
 
     The correction applies to the ephemeris with the IODE it names (A.4.4.7). When the SBAS moves
@@ -798,42 +826,56 @@ def _long_term(ctx: _Context, m: SbasMessages, mask: _Mask, deg: dict, eph: pl.D
 def _geometry(ctx: _Context, eph: pl.DataFrame, pr: np.ndarray, ltc: dict, rx: np.ndarray,
               lat: float, lon: float) -> dict:  # fmt: skip
     """Satellite position and clock at transmission (broadcast + long-term corrections), range,
-    elevation and azimuth at the reference."""
+    elevation and azimuth at the reference.
+
+    The gathered broadcast elements (some 30 columns) are dropped before the per-row outputs are
+    allocated, so that these reuse their memory.
+    """
     n = ctx.t.size
     row = ltc["eph_row"]
     ok = (row >= 0) & np.isfinite(pr)
-    out = {"row": row, "rho": np.full(n, np.nan), "clock": np.full(n, np.nan), "tgd": np.full(n, np.nan),
-           "elev": np.full(n, -np.pi / 2), "azim": np.zeros(n), "los": np.full((n, 3), np.nan)}  # fmt: skip
-    if not ok.any():
-        return out
     i = np.flatnonzero(ok)
+    if i.size == 0:
+        return _geometry_out(n, row)
     tau0 = pr[i] / C
     el = ephemeris_elements(eph, row[i])  # gathered once for every evaluation below
     ti = ctx.t[i]
     tx = -tau0 - clock_at(el, ti, -tau0)  # transmission time offset from the epoch, s (receiver clock ~ 0
+    del tau0
     st = state_at(el, ti, tx)  # is not assumed: the clock bias cancels in the solution's clock term)
-    pos = st.position + np.stack([ltc["dx"][i], ltc["dy"][i], ltc["dz"][i]], axis=-1)
-    # the light time from the position at transmission (one evaluation: the position does not change)
-    rot = rotate_earth(pos, _distance(pos, rx) / C)
-    d = [rot[:, k] - rx[k] for k in range(3)]  # receiver to satellite
-    rho = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    e, nn, u = pymap3d.ecef2enu(rot[:, 0], rot[:, 1], rot[:, 2], lat, lon,
-                                float(pymap3d.ecef2geodetic(*rx)[2]))  # fmt: skip
-    out["rho"][i] = rho
-    los = np.empty((i.size, 3))
-    for k in range(3):
-        np.divide(d[k], rho, out=los[:, k])
-    out["los"][i] = los
     clock = st.clock
     if ctx.opt.relativity == "rv":  # -2 r.v / c^2 from the orbit itself (gLAB's choice)
         h = 1e-3
         vel = (state_at(el, ti, tx + h).position - state_at(el, ti, tx - h).position) / (2 * h)
         clock = clock - st.relativistic - 2.0 * np.sum(st.position * vel, axis=-1) / C**2
+        del vel
+    del el, ti, tx
+    out = _geometry_out(n, row)
     out["clock"][i] = clock + ltc["daf0_t"][i]
     out["tgd"][i] = st.tgd
+    pos = st.position + np.stack([ltc["dx"][i], ltc["dy"][i], ltc["dz"][i]], axis=-1)
+    del st, clock
+    # the light time from the position at transmission (one evaluation: the position does not change)
+    rot = rotate_earth(pos, _distance(pos, rx) / C)
+    del pos
+    d = [rot[:, k] - rx[k] for k in range(3)]  # receiver to satellite
+    rho = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    out["rho"][i] = rho
+    for k in range(3):
+        out["los"][i, k] = d[k] / rho
+    del d, rho
+    e, nn, u = pymap3d.ecef2enu(rot[:, 0], rot[:, 1], rot[:, 2], lat, lon,
+                                float(pymap3d.ecef2geodetic(*rx)[2]))  # fmt: skip
+    del rot
     out["elev"][i] = np.arctan2(u, np.hypot(e, nn))
     out["azim"][i] = np.arctan2(e, nn)
     return out
+
+
+def _geometry_out(n: int, row: np.ndarray) -> dict:
+    """:func:`_geometry`'s outputs for rows without a satellite position (``row``: the ephemeris rows)."""
+    return {"row": row, "rho": np.full(n, np.nan), "clock": np.full(n, np.nan), "tgd": np.full(n, np.nan),
+            "elev": np.full(n, -np.pi / 2), "azim": np.zeros(n), "los": np.full((n, 3), np.nan)}  # fmt: skip
 
 
 def _distance(pos: np.ndarray, rx: np.ndarray) -> np.ndarray:
@@ -865,10 +907,12 @@ def _ephemeris_rows(ctx: _Context, eph: pl.DataFrame, iode: np.ndarray) -> np.nd
     return out
 
 
-def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, deg: dict) -> dict:
+def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, deg: _Degradation) -> dict:
     """Grid ionosphere: slant delay, sigma_UIRE^2 and the pierce point (DO-229D A.4.4.10)."""
     n = ctx.t.size
     lat_pp, lon_pp = ionomod.pierce_point(np.deg2rad(lat), np.deg2rad(lon), geom["elev"], geom["azim"])
+    np.rad2deg(lat_pp, out=lat_pp)  # degrees from here on (the outputs and the cell selection)
+    np.rad2deg(lon_pp, out=lon_pp)
     fpp = ionomod.obliquity(geom["elev"])
     mk = m.igp_mask
     # MT 18 in force per band, and its time-out
@@ -945,28 +989,21 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
         fresh = tag_g[r] >= (ctx.t[idx[rows]] - d_max)[:, None]
         return ((fl & 1) != 0) & fresh, (fl & 2) != 0
 
-    sel = ionomod.select_and_interpolate(np.rad2deg(lat_pp[idx]), np.rad2deg(lon_pp[idx]), in_mask, status,
-                                         keyed=True)  # fmt: skip
-    ok_sub, w, mode_sub = sel.ok, sel.weights, sel.mode
+    sel = ionomod.select_and_interpolate(lat_pp[idx], lon_pp[idx], in_mask, status, keyed=True)
+    ok_sub, w, mode_sub, fail_sub = sel.ok, sel.weights, sel.mode, sel.fail
+    del sel  # the corner keys, (n, 4)
     # only pierce points with a cell can have a correction (ok_sub False elsewhere): the grid values
     # are those of status()'s look-up
-    f, r = found_r.get("rows", np.zeros(0, np.int64)), found_r.get("r", np.zeros((0, 4), np.int64))
-    rows_f, w_f = idx[f], w[f]
-    givd = np.nan_to_num(np.append(g["givd"].to_numpy(), np.nan))[r]
-    s2give = np.nan_to_num(np.append(g["sigma2_give"].to_numpy(), np.nan))[r]
-    t_iono = (ctx.t[rows_f][:, None] - tag_g[r]) / US + 1.0  # t - (tag - 1)
-    d = {k2: deg[k2][rows_f][:, None] for k2 in ("ciono_step", "iiono", "ciono_ramp", "rss_iono")}
-    eps = d["ciono_step"] * np.floor(_ratio(t_iono, d["iiono"])) + d["ciono_ramp"] * t_iono
-    s2grid = np.where(d["rss_iono"] > 0, s2give + eps**2, (np.sqrt(s2give) + eps) ** 2)
+    f, r = found_r.pop("rows", np.zeros(0, np.int64)), found_r.pop("r", np.zeros((0, 4), np.int64))
     vert, s2uive = np.zeros(idx.size), np.zeros(idx.size)
-    vert[f] = _sum_corners(w_f * givd)
-    s2uive[f] = _sum_corners(w_f * s2grid)
+    vert[f], s2uive[f] = _grid_sums(ctx.t, idx[f], w[f], r, g, tag_g, deg)
+    del f, r, w
     ok = np.zeros(n, bool)
     ok[idx] = ok_sub
     mode = np.full(n, -1)
     mode[idx] = mode_sub
     fail = np.zeros(n, np.int64)
-    fail[idx] = sel.fail
+    fail[idx] = fail_sub
     slant = np.full(n, np.nan)
     slant[idx] = np.where(ok_sub, fpp[idx] * vert, np.nan)
     s2uire = np.full(n, np.nan)
@@ -976,7 +1013,35 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
     mask_to = (last18 >= 0) & (ctx.age(_take(tmk, last18, fill=0)) > ctx.timeout(18))
     return {"ok": ok, "mode": mode, "fail": fail, "slant": slant, "sigma2_uire": s2uire, "fpp": fpp,
             "mask_timeout": mask_to,
-            "ipp_lat": np.rad2deg(lat_pp), "ipp_lon": np.rad2deg(lon_pp)}  # fmt: skip
+            "ipp_lat": lat_pp, "ipp_lon": lon_pp}  # fmt: skip
+
+
+def _grid_sums(t: np.ndarray, rows: np.ndarray, w: np.ndarray, r: np.ndarray, g: pl.DataFrame,
+               tag_g: np.ndarray, deg: _Degradation) -> tuple[np.ndarray, np.ndarray]:  # fmt: skip
+    """Vertical delay and sigma_UIVE^2 at the pierce points ``rows`` from their corners' grid values (DO-229D
+    A.4.4.10.3, A.4.5.2): sums over the corners of w GIVD and w sigma2_grid, sigma2_grid = sigma2_GIVE +
+    eps_iono^2 (RSS_iono) or (sigma_GIVE + eps_iono)^2, eps_iono = C_iono_step floor((t - t_iono) / I_iono) +
+    C_iono_ramp (t - t_iono), t_iono = tag - 1 s.
+
+    ``w``: (m, 4) weights, ``r``: (m, 4) rows of ``g`` (-1 for none: a value of 0), ``tag_g`` their tags
+    with a last entry for -1. Corner by corner on (m,) columns (no (m, 4) temporaries), summed from 0 in
+    corner order: the numbers of ``(w * x).sum(axis=1)``, which adds four terms so, bit for bit.
+    """
+    givd_g = np.nan_to_num(np.append(g["givd"].to_numpy(), np.nan))
+    s2give_g = np.nan_to_num(np.append(g["sigma2_give"].to_numpy(), np.nan))
+    t_rows = t[rows]
+    step, interval, ramp = deg.at("ciono_step", rows), deg.at("iiono", rows), deg.at("ciono_ramp", rows)
+    rss = deg.at("rss_iono", rows) > 0
+    vert, s2uive = np.zeros(rows.size), np.zeros(rows.size)
+    for k in range(r.shape[1]):
+        rk = r[:, k]
+        t_iono = (t_rows - tag_g[rk]) / US + 1.0  # t - (tag - 1)
+        eps = step * np.floor(_ratio(t_iono, interval)) + ramp * t_iono
+        s2give = s2give_g[rk]
+        s2grid = np.where(rss, s2give + eps**2, (np.sqrt(s2give) + eps) ** 2)
+        vert += w[:, k] * givd_g[rk]
+        s2uive += w[:, k] * s2grid
+    return vert, s2uive
 
 
 def _klobuchar_fallback(

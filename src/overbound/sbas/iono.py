@@ -42,14 +42,22 @@ _CORNERS = np.array([[1, 1], [0, 1], [0, 0], [1, 0]])
 def pierce_point(
     lat_rad: np.ndarray, lon_rad: np.ndarray, elev_rad: np.ndarray, azim_rad: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Latitude and longitude (rad, longitude in [-pi, pi)) of the ionospheric pierce point."""
+    """Latitude and longitude (rad, longitude in [-pi, pi)) of the ionospheric pierce point.
+
+    The test for pierce points across the pole (A.4.4.10.1) only applies to users poleward of 70 deg
+    and is skipped (the same numbers) when there is none.
+    """
     psi = np.pi / 2 - elev_rad - np.arcsin(R_EARTH / (R_EARTH + H_IONO) * np.cos(elev_rad))
     lat_pp = np.arcsin(np.sin(lat_rad) * np.cos(psi) + np.cos(lat_rad) * np.sin(psi) * np.cos(azim_rad))
     dlon = np.arcsin(np.clip(np.sin(psi) * np.sin(azim_rad) / np.cos(lat_pp), -1, 1))
+    north, south = lat_rad > np.deg2rad(70), lat_rad < np.deg2rad(-70)
+    if not (np.any(north) or np.any(south)):
+        lon_pp = lon_rad + dlon
+        return lat_pp, (lon_pp + np.pi) % (2 * np.pi) - np.pi
     # pierce points across the pole (A.4.4.10.1)
-    over_n = (lat_rad > np.deg2rad(70)) & (np.tan(psi) * np.cos(azim_rad) > np.tan(np.pi / 2 - lat_rad))
+    over_n = north & (np.tan(psi) * np.cos(azim_rad) > np.tan(np.pi / 2 - lat_rad))
     tan_s = np.tan(psi) * np.cos(azim_rad + np.pi)
-    over_s = (lat_rad < np.deg2rad(-70)) & (tan_s > np.tan(np.pi / 2 + lat_rad))
+    over_s = south & (tan_s > np.tan(np.pi / 2 + lat_rad))
     lon_pp = np.where(over_n | over_s, lon_rad + np.pi - dlon, lon_rad + dlon)
     return lat_pp, (lon_pp + np.pi) % (2 * np.pi) - np.pi
 
@@ -260,11 +268,10 @@ def select_and_interpolate(
         g = rest[good]
         found[g], key[g], code[g], x[g], y[g] = True, k[good], c[good], xx[good], yy[good]
 
-    cands = _candidates(lat, lon)
-    for want in (4, 3):  # (c), (d): the 10x10 cells
-        for la_c, lo_c, dlat_c, dlon_c in cands:
+    for want in (4, 3):  # (c), (d): the 10x10 cells, for the pierce points still without one
+        for j in range(4):
             rest = idx[~found[idx]]
-            take(rest, la_c[rest], lo_c[rest], dlat_c, dlon_c, want)
+            take(rest, *_candidates(lat[rest], lon[rest])[j], want)
 
     fail = np.where(todo, FAIL_NO_CELL, FAIL_POLAR)
     ok = np.zeros(n, bool)
@@ -291,7 +298,8 @@ def select_and_interpolate(
         w[tri] = w3
         m_f[tri] = np.where(three_ok[tri], missing + 1, -1)
         ok[f] = good
-        weights[f] = np.where(good[:, None], w, 0.0)
+        w[~good] = 0.0
+        weights[f] = w
         mode[f] = np.where(good, m_f, -1)
         outside = (n_sel == 4) & (n_good == 3) & ~three_ok
         fail[f] = np.select([good, dont, outside], [0, FAIL_DONT_USE, FAIL_OUTSIDE], FAIL_UNUSABLE)

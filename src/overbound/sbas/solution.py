@@ -72,6 +72,7 @@ def weighted_least_squares(
     el, az, y_used = elev[idx], azim[idx], prefit[idx]
     ce = np.cos(el)
     g_used = np.stack([-ce * np.sin(az), -ce * np.cos(az), -np.sin(el), np.ones(idx.size)], axis=-1)
+    del el, az, ce
     # by slot: (4, slots, epochs) and (slots, epochs), each (column, slot) a contiguous run over epochs
     cell = slot * n_epochs + ep
     g = np.zeros((4, width, n_epochs))
@@ -81,9 +82,11 @@ def weighted_least_squares(
     w.reshape(-1)[cell] = 1.0 / sigma2[idx]
     y = np.zeros((width, n_epochs))
     y.reshape(-1)[cell] = y_used
+    del slot, cell
     gw = g * w
     ok = counts >= min_sats
     normal, rhs = _normal_equations(g, gw, y)
+    del g, gw, w, y  # the padded arrays: freed before the residuals
     normal[~ok] = np.eye(4)  # placeholders, discarded below
     cov = np.linalg.inv(normal)
     x = np.einsum("eij,ej->ei", cov, rhs)
