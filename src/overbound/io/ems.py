@@ -37,12 +37,11 @@ from __future__ import annotations
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import polars as pl
 
-from overbound.io.open import Source, open_binary, source_name
+from overbound.io.open import Source, read_bytes, source_name
 from overbound.io.schema import InputError, ReadReport
 from overbound.sbas.bits import FRAME_BYTES, message_type
 from overbound.sbas.crc import crc_ok
@@ -99,7 +98,7 @@ def read_ems(sources: Source | Sequence[Source], *, strict: bool = False) -> tup
     many = isinstance(sources, Sequence) and not isinstance(sources, str | bytes)
     items = list(sources) if many else [sources]  # type: ignore[list-item]
     names = tuple(source_name(s) for s in items)
-    buf, file_start = _join([_slurp(s) for s in items])
+    buf, file_start = _join([read_bytes(s) for s in items])
     lines = _Lines.of(buf, file_start)
     data, hexok = _hex_bytes(buf, lines)
     reason = _check_layout(lines.mat, lines.length, hexok)
@@ -146,15 +145,6 @@ def _frames_in_time_order(
         ),
     )
     return _sort_rejected(_drop_duplicates(frames, strict))
-
-
-def _slurp(source: Source) -> bytes:
-    stream = open_binary(source)
-    try:
-        return stream.read()
-    finally:
-        if isinstance(source, str | Path):
-            stream.close()
 
 
 def _join(raws: list[bytes]) -> tuple[np.ndarray, np.ndarray]:

@@ -20,7 +20,7 @@ import polars as pl
 from overbound.io.geodesy import Reference
 from overbound.io.schema import REQUIRED, InputError, ReadReport
 
-__all__ = ["FORMATS", "Source", "open_binary", "open_text", "read", "sniff", "source_name"]
+__all__ = ["FORMATS", "Source", "open_binary", "open_text", "read", "read_bytes", "sniff", "source_name"]
 
 Source = str | Path | TextIO | BinaryIO
 
@@ -64,6 +64,16 @@ def open_text(source: Source) -> TextIO:
     if isinstance(source, io.TextIOBase):
         return source  # type: ignore[return-value]
     return io.TextIOWrapper(open_binary(source), encoding="utf-8", errors="replace", newline=None)
+
+
+def read_bytes(source: Source) -> bytes:
+    """All bytes of ``source`` (gunzipped if needed); a file opened here is closed, a stream is left open."""
+    stream = open_binary(source)
+    try:
+        return stream.read()
+    finally:
+        if isinstance(source, str | Path):
+            stream.close()
 
 
 def _head(source: Source, n: int = 8192) -> bytes:

@@ -51,8 +51,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from overbound.io.ems import _HEX, _frames_in_time_order, _gather, _join, _Lines, _report, _slurp
-from overbound.io.open import Source, source_name
+from overbound.io.ems import _HEX, _frames_in_time_order, _gather, _join, _Lines, _report
+from overbound.io.open import Source, read_bytes, source_name
 from overbound.io.schema import InputError, ReadReport
 from overbound.sbas.bits import FRAME_BYTES, message_type
 from overbound.sbas.crc import crc_ok
@@ -104,7 +104,7 @@ def read_rinex_b(
     many = isinstance(sources, Sequence) and not isinstance(sources, str | bytes)
     items = list(sources) if many else [sources]  # type: ignore[list-item]
     names = tuple(source_name(s) for s in items)
-    buf, file_start = _join([_slurp(s) for s in items])
+    buf, file_start = _join([read_bytes(s) for s in items])
     lines = _Lines.of(buf, file_start)
     header = _header_lines(names, lines)
     rec = ~header & _record_like(lines.mat)

@@ -23,7 +23,7 @@ from pyubx2.exceptions import UBXMessageError, UBXParseError, UBXTypeError
 from overbound.io._common import RowLog, finalize_epochs
 from overbound.io.geodesy import Reference, enu_errors_geodetic
 from overbound.io.gpstime import leap_seconds
-from overbound.io.open import open_binary, source_name
+from overbound.io.open import read_bytes, source_name
 from overbound.io.schema import InputError, ReadReport
 
 __all__ = ["PL_FRAMES", "read_ubx"]
@@ -152,7 +152,7 @@ def read_ubx(
     (datetime.datetime(2019, 1, 14, 0, 0), 1.11, 5.0, 9.0, '3D')
     """
     name = source_name(source)
-    data = _read_bytes(source)
+    data = read_bytes(source)
     log = RowLog(name, strict=strict)
     frames, counts, skipped = _scan(data, log)
     log.rows_read = sum(counts.values())
@@ -171,15 +171,6 @@ def read_ubx(
     if skipped:
         frame_note += f"; {skipped} bytes outside UBX frames skipped"
     return finalize_epochs(epochs, log, format="ubx", notes=(frame_note, *notes))
-
-
-def _read_bytes(source: str | Path | TextIO | BinaryIO) -> bytes:
-    stream = open_binary(source)
-    try:
-        return stream.read()
-    finally:
-        if isinstance(source, str | Path):
-            stream.close()
 
 
 def _reject(log: RowLog, offset: int, reason: str) -> None:

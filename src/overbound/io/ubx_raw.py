@@ -54,7 +54,7 @@ from pyubx2 import UBXReader
 from pyubx2.exceptions import UBXMessageError, UBXParseError, UBXTypeError
 
 from overbound.io._rinex import GPS_EPOCH_US, US
-from overbound.io.open import Source, open_binary, source_name
+from overbound.io.open import Source, read_bytes, source_name
 from overbound.io.schema import InputError, ReadReport
 from overbound.sbas.bits import FRAME_BYTES
 from overbound.sbas.crc import crc_ok
@@ -116,12 +116,7 @@ def read_ubx_raw(source: Source) -> tuple[UbxRaw, ReadReport]:
         The file is missing, is not a UBX log, or holds no raw measurement (RXM-RAW/RAWX).
     """
     name = source_name(source)
-    stream = open_binary(source)
-    try:
-        data = stream.read()
-    finally:
-        if not hasattr(source, "read"):
-            stream.close()
+    data = read_bytes(source)
     if not is_ubx(data[:64]):
         raise InputError(name, "not a u-blox UBX log (no 0xB5 0x62 sync, nor hex-wrapped 'b562...' frames)")
     rejected: Counter = Counter()
