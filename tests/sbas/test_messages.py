@@ -19,7 +19,7 @@ import pytest
 
 from overbound.io.ems import read_ems
 from overbound.io.gpstime import leap_seconds
-from overbound.sbas.crc import POLY, crc_ok
+from overbound.sbas.crc import crc_ok, parity_of_data
 from overbound.sbas.frames import SbasFrames
 from overbound.sbas.igp import BAND_SIZES, band_igps
 from overbound.sbas.messages import AI, SIGMA2_GIVE, SIGMA2_UDRE, decode
@@ -471,15 +471,6 @@ def test_bad_crc_messages_are_dropped_and_counted(egnos):
 
 
 # --- constructed messages for the types absent from the real data ------------------------------------
-def _crc_by_division(bits: str) -> int:
-    reg = 0
-    for b in bits:
-        reg ^= int(b) << 23
-        reg = ((reg << 1) ^ POLY) if reg & 0x800000 else reg << 1
-        reg &= 0xFFFFFF
-    return reg
-
-
 def encode(mt: int, fields: list[tuple[int, int, int]], preamble: int = 0x53) -> np.ndarray:
     """A 32-byte message with the given (first bit, width, integer value) fields and a valid CRC."""
     bits = ["0"] * 256
@@ -491,7 +482,11 @@ def encode(mt: int, fields: list[tuple[int, int, int]], preamble: int = 0x53) ->
     put(8, 6, mt)
     for start, width, value in fields:
         put(start, width, value)
-    put(226, 24, _crc_by_division("".join(bits[:226])))
+    put(226, 24, int(parity_of_data(_frame(bits)[None, :])[0]))  # test_crc checks it by bit division
+    return _frame(bits)
+
+
+def _frame(bits: list[str]) -> np.ndarray:
     return np.frombuffer(int("".join(bits), 2).to_bytes(32, "big"), np.uint8)
 
 
