@@ -200,13 +200,14 @@ def test_pierce_point_and_obliquity_at_zenith_and_horizon():
 def _grid(mask_pts, bad=(), dnu=()):
     """in_mask / status callbacks for a fixed set of IGPs (lat, lon); ``bad`` unusable, ``dnu`` don't use."""
 
-    def member(pts, clat, clon):
-        key = {(round(a), round(b)) for a, b in pts}
-        return np.array([[(round(a), round(b)) in key for a, b in zip(la, lo, strict=True)]
+    def member(pts, key):
+        clat, clon = iono.igp_position(key)
+        wanted = {(round(a), round(b)) for a, b in pts}
+        return np.array([[(round(a), round(b)) in wanted for a, b in zip(la, lo, strict=True)]
                          for la, lo in zip(clat, clon, strict=True)]).reshape(clat.shape)  # fmt: skip
 
-    return (lambda rows, la, lo: member(mask_pts, la, lo),
-            lambda rows, la, lo: (~member(bad, la, lo), member(dnu, la, lo)))  # fmt: skip
+    return (lambda rows, key: member(mask_pts, key),
+            lambda rows, key: (~member(bad, key), member(dnu, key)))  # fmt: skip
 
 
 def _full_grid(lat0=30, lat1=60, lon0=-20, lon1=20):
@@ -221,13 +222,13 @@ def test_grid_interpolation_reproduces_a_plane():
     plane = lambda la, lo: 2.0 + 0.03 * la - 0.01 * lo  # noqa: E731
     drop = rng.integers(0, 5, 200)  # 4: keep all four
 
-    def status(rows, clat, clon):
-        u = np.ones(clat.shape, bool)
+    def status(rows, key):
+        u = np.ones(key.shape, bool)
         k = drop[rows]
         u[np.flatnonzero(k < 4), k[k < 4]] = False
-        return u, np.zeros(clat.shape, bool)
+        return u, np.zeros(key.shape, bool)
 
-    sel = iono.select_and_interpolate(lat, lon, lambda r, la, lo: np.ones(la.shape, bool), status)
+    sel = iono.select_and_interpolate(lat, lon, lambda r, key: np.ones(key.shape, bool), status)
     ok, clat, clon, w, mode = sel.ok, sel.clat, sel.clon, sel.weights, sel.mode
     assert ok[drop == 4].all() and ok.sum() > 100 and np.allclose(w.sum(axis=1)[ok], 1.0)
     assert (w[ok] >= -1e-12).all()  # a triangle is used only when it contains the pierce point

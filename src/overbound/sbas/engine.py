@@ -989,7 +989,7 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
         fresh = tag_g[r] >= (ctx.t[idx[rows]] - d_max)[:, None]
         return ((fl & 1) != 0) & fresh, (fl & 2) != 0
 
-    sel = ionomod.select_and_interpolate(lat_pp[idx], lon_pp[idx], in_mask, status, keyed=True)
+    sel = ionomod.select_and_interpolate(lat_pp[idx], lon_pp[idx], in_mask, status)
     ok_sub, w, mode_sub, fail_sub = sel.ok, sel.weights, sel.mode, sel.fail
     del sel  # the corner keys, (n, 4)
     # only pierce points with a cell can have a correction (ok_sub False elsewhere): the grid values

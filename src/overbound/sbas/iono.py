@@ -192,18 +192,11 @@ def _triangle_inside(code: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np
     return missing, w3, (w3 >= -1e-12).all(axis=1)
 
 
-def _by_position(fn: Callable) -> Callable:
-    """A callback of (rows, lat, lon) as one of (rows, key)."""
-    return lambda rows, key: fn(rows, *igp_position(key))
-
-
 def select_and_interpolate(
     lat_pp_deg: np.ndarray,
     lon_pp_deg: np.ndarray,
     in_mask: Callable[..., np.ndarray],
     status: Callable[..., tuple[np.ndarray, np.ndarray]],
-    *,
-    keyed: bool = False,
 ) -> GridSelection:
     """Select the IGPs around each pierce point and their interpolation weights (DO-229D A.4.4.10.2-3).
 
@@ -220,16 +213,13 @@ def select_and_interpolate(
     Parameters
     ----------
     lat_pp_deg, lon_pp_deg : pierce points (deg), shape (n,).
-    in_mask : ``in_mask(rows, lat, lon)`` -> (len(rows), 4) bool, the IGP at (lat, lon) is in the
-        mask in force at pierce point ``rows``' epoch (``rows`` index the inputs).
-    status : ``status(rows, lat, lon)`` -> (usable, dont_use), each (len(rows), 4) bool.
-    keyed : the callbacks take ``(rows, key)`` instead, ``key`` the (len(rows), 4) :func:`igp_key` of
-        the IGPs (no conversion from coordinates).
+    in_mask : ``in_mask(rows, key)`` -> (len(rows), 4) bool, the IGP of :func:`igp_key` ``key``
+        ((len(rows), 4) int; :func:`igp_position` gives its latitude and longitude) is in the mask in
+        force at pierce point ``rows``' epoch (``rows`` index the inputs).
+    status : ``status(rows, key)`` -> (usable, dont_use), each (len(rows), 4) bool.
     """
     lat = np.asarray(lat_pp_deg, float)
     lon = np.asarray(lon_pp_deg, float)
-    if not keyed:
-        in_mask, status = _by_position(in_mask), _by_position(status)
     n = lat.size
     mid = np.abs(lat) <= 60
     todo = mid | ((np.abs(lat) > 60) & (np.abs(lat) <= 75))
