@@ -421,7 +421,9 @@ def test_gh5_analyze_adds_the_parametric_section(uslo_run):
     assert (
         '<section id="parametric-vertical">' in page and "no 15 s continuity window could be counted" in page
     )
-    assert re.search(r"parametric vertical: P_MI \d(\.\d+)?e-\d{3} per epoch", res.output)  # from log10
+    # the closing lines are the verdict matrix, never a model's raw tiny probability (issue 12)
+    assert "Verdicts" in res.output and "PL bounding (MI)" in res.output
+    assert not re.search(r"e-\d{2,3}\b", res.output.replace("e-0", ""))
 
 
 def test_gh5_analyze_no_parametric_and_too_few_epochs(tmp_path):
@@ -445,3 +447,43 @@ def test_gh5_analyze_no_parametric_and_too_few_epochs(tmp_path):
     assert json.loads((tmp_path / "b" / "summary.json").read_text())["parametric"] == {}
     assert not (tmp_path / "b" / "parametric.json").exists()
     assert "parametric-vertical" not in (tmp_path / "b" / "report.html").read_text()
+
+
+def test_summary_is_byte_identical_from_another_folder(tmp_path):
+    """The same input under two folders gives the same summary.json (no absolute path in it)."""
+    import shutil
+
+    outs = []
+    for folder in ("a", "b/deeper/still"):
+        d = tmp_path / folder
+        d.mkdir(parents=True)
+        shutil.copy(POS, d / POS.name)
+        out = d / "out"
+        res = CliRunner().invoke(
+            main,
+            [
+                "analyze",
+                str(d / POS.name),
+                "--reference",
+                USLO_REFERENCE,
+                "-o",
+                str(out),
+                "--no-evt",
+                "--no-parametric",
+                "--no-confidence",
+            ],
+        )
+        assert res.exit_code == 0, res.output
+        outs.append((out / "summary.json").read_bytes())
+    assert outs[0] == outs[1]
+    doc = json.loads(outs[0])
+    assert str(tmp_path) not in outs[0].decode()
+    assert doc["provenance"]["inputs"][0]["name"] == POS.name
+    assert set(doc["verdicts"]["LPV"]) == {
+        "availability",
+        "continuity",
+        "accuracy",
+        "integrity",
+        "pl_bounding",
+        "overall",
+    }

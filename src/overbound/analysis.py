@@ -5,6 +5,7 @@ from __future__ import annotations
 import datetime as dt
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -15,9 +16,10 @@ from overbound.io.open import Source, read, source_name
 from overbound.io.schema import InputError, ReadReport, validate_epochs
 from overbound.methods.confidence_level import ConfidenceAnalysis, confidence_analysis
 from overbound.methods.counting import CountingResult, count_kpis
+from overbound.methods.evidence import Evidence, counted_evidence
 from overbound.services import SERVICES, ServiceLevel, resolve_services
 
-if TYPE_CHECKING:  # a run-time import would be circular (tail_extrapolation -> report.json -> analysis)
+if TYPE_CHECKING:  # imported when run: they are the slow part of the import
     from overbound.methods.parametric import ParametricAnalysis
     from overbound.methods.tail_extrapolation import TailAnalysis
 
@@ -41,6 +43,9 @@ class Analysis:
         tail values): no estimate there, and why.
     parametric : the parametric availability, integrity and continuity analysis (Kannemans 2006) of
         both axes, ``None`` when not run (an axis it could not analyse carries its reason).
+    evidence : the counted evidence of the verdicts (:func:`~overbound.methods.evidence.counted_evidence`):
+        counts with exact bounds that account for the dependence between epochs, and the
+        safety-index tail counts the models are checked against.
     """
 
     table: pl.DataFrame
@@ -52,6 +57,7 @@ class Analysis:
     evt: tuple[TailAnalysis, ...] = ()
     evt_failures: tuple[tuple[str, str], ...] = ()
     parametric: ParametricAnalysis | None = None
+    evidence: Evidence | None = None
 
     @property
     def n_rejected(self) -> int:
@@ -164,11 +170,12 @@ def analyze(
             time_range=time_range,
             progress=progress,
         )
-        label = title or ", ".join(source_name(s) for s in inputs)
+        label = title or ", ".join(Path(source_name(s)).name for s in inputs)
     levels = _levels(services)
     if progress:
         progress("counting KPIs")
     counting = count_kpis(table, levels)
+    evidence = counted_evidence(table, counting, levels)
     axes = _confidence_axes(table) if confidence is None else tuple(confidence)
     if axes and progress:
         progress("PL confidence level")
@@ -182,7 +189,7 @@ def analyze(
         if progress:
             progress("parametric analysis")
         par = parametric_analysis(table, services=levels)
-    return Analysis(table, reports, levels, counting, label, cl, done, failed, par)
+    return Analysis(table, reports, levels, counting, label, cl, done, failed, par, evidence)
 
 
 def _confidence_axes(table: pl.DataFrame) -> tuple[str, ...]:
@@ -255,8 +262,9 @@ class Verdict:
 def verdicts(analysis: Analysis, service: ServiceLevel) -> tuple[Verdict, ...]:
     """The service's counting KPIs against its requirements.
 
-    The integrity verdict here is only the counted one (no HMI epoch observed): a
-    count can never show 2e-7 per approach; the statistical methods do that.
+    These are the KPI rows of the report. The MI and HMI counts carry no pass: a count can never
+    show 2e-7 per approach (an observed HMI is a fail); the verdicts of :mod:`overbound.verdict`
+    weigh the counts with the statistical methods.
     """
     c = analysis.counting
     k = c.services[service.name]
@@ -273,16 +281,31 @@ def verdicts(analysis: Analysis, service: ServiceLevel) -> tuple[Verdict, ...]:
     ]
     if service.val is not None:
         out.append(_check("|VPE|95 (m)", c.vpe95, service.accuracy_v95, "<="))
-    hmi = k.horizontal.stanford.hmi + (k.vertical.stanford.hmi if k.vertical.stanford else 0)
+    v = k.vertical.stanford
+    mi = k.horizontal.stanford.mi + k.horizontal.stanford.hmi + (v.mi + v.hmi if v else 0)
+    hmi = k.horizontal.stanford.hmi + (v.hmi if v else 0)
+    risk = f"{service.integrity_risk:g} per {service.integrity_exposure_s:g} s"
+    out.append(
+        Verdict(
+            "MI epochs (counted)",
+            mi,
+            None,
+            "<=",
+            None,
+            f"PE > PL while PL < AL (HMI included); the PL-bounding verdict ({risk}) weighs the count with "
+            "the tail models: see the verdicts",
+        )
+    )
     out.append(
         Verdict(
             "HMI epochs (counted)",
             hmi,
             0,
             "<=",
-            hmi == 0,
-            f"requirement {service.integrity_risk:g} per {service.integrity_exposure_s:g} s needs the "
-            "statistical methods; a count only shows whether HMI was observed",
+            False if hmi else None,
+            "an observed HMI is an integrity fail"
+            if hmi
+            else f"none observed; a count alone cannot show {risk}: see the integrity verdict",
         )
     )
     return tuple(out)

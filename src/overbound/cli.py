@@ -215,13 +215,15 @@ def _run_analysis(
     """Analyse, write summary.json and report.html (and the epoch table); return their paths."""
     from overbound.analysis import analyze as run
     from overbound.io.table import write_epochs
+    from overbound.jsontext import dumps
     from overbound.methods.parametric import write_parametric
     from overbound.methods.tail_extrapolation import write_evt
     from overbound.report.confidence import json_name, write_confidence
     from overbound.report.evt import json_name as evt_json_name
     from overbound.report.html import write_report
-    from overbound.report.json import summary_dict, write_summary
+    from overbound.report.json import provenance_dict, summary_dict
     from overbound.report.parametric import JSON_NAME as PARAMETRIC_JSON
+    from overbound.verdict import assess
 
     if epochs_out:
         columns = None  # the epoch table written keeps every column
@@ -253,22 +255,49 @@ def _run_analysis(
         if result.parametric is not None:
             write_parametric(result.parametric, out_dir / PARAMETRIC_JSON)
         step("writing summary.json")
-        summary = write_summary(result, out_dir / "summary.json")
+        assessment = assess(result)
+        options = {
+            "services": list(services),
+            "confidence": confidence,
+            "evt": evt,
+            "parametric": parametric,
+            **{k: _option_text(v) for k, v in read_opts.items() if v is not None},
+        }
+        command = ["overbound", *sys.argv[1:]]
+        doc = summary_dict(
+            result, assessment=assessment, provenance=provenance_dict(inputs, command, options)
+        )
+        summary = out_dir / "summary.json"
+        summary.write_text(dumps(doc), encoding="utf-8")
         step("drawing report.html")
-        report = write_report(result, out_dir, summary=summary_dict(result))
+        report = write_report(result, out_dir, summary=doc, assessment=assessment)
         if epochs_out:
             write_epochs(result.table, epochs_out)
-    _print_summary(result)
-    return summary, report
+    _print_summary(result, assessment)
+    return summary, report, assessment
+
+
+def _option_text(v):
+    """An option value as JSON-friendly text (a reference as its string, a time as ISO)."""
+    if isinstance(v, list | tuple):
+        return [_option_text(x) for x in v]
+    if isinstance(v, dict):
+        return {str(k): _option_text(x) for k, x in v.items()}
+    if isinstance(v, bool | int | float | str) or v is None:
+        return v
+    return v.isoformat() if hasattr(v, "isoformat") else str(v)
 
 
 def _fmt(x: float | None, pct: bool = False) -> str:
+    """A share as a percentage, or a probability (``< 1e-15`` below that, :mod:`overbound.numbers`)."""
+    from overbound.numbers import format_probability
+
     if x is None:
         return "n/a"
-    return f"{100 * x:.3f} %" if pct else f"{x:.3g}"
+    return f"{100 * x:.3f} %" if pct else format_probability(x)
 
 
-def _print_summary(result) -> None:
+def _print_summary(result, assessment) -> None:
     c = result.counting
     rejected = sum(r.n_rejected for r in result.reports)
     console.print(
@@ -294,13 +323,39 @@ def _print_summary(result) -> None:
             f"{k.horizontal.stanford.hmi}/{v.hmi if v else '-'}",
         )
     console.print(t)
-    for e in result.evt:
-        console.print(_evt_line(e), highlight=False, soft_wrap=True)
     for axis, reason in result.evt_failures:
         console.print(f"EVT {axis}: no estimate: {reason}", highlight=False, soft_wrap=True)
     if result.parametric is not None:
-        for line in _parametric_lines(result.parametric):
-            console.print(line, highlight=False, soft_wrap=True)
+        for axis, reason in result.parametric.reasons.items():
+            console.print(f"parametric {axis}: no estimate: {reason}", highlight=False, soft_wrap=True)
+    _print_verdicts(assessment)
+
+
+_VERDICT_STYLE = {"pass": "bold green", "fail": "bold red", "not demonstrated": "bold yellow"}
+
+
+def _print_verdicts(assessment) -> None:
+    """The verdict matrix, then one line per verdict that is not a pass."""
+    from overbound.report.verdicts import KIND_TITLES
+    from overbound.verdict import KINDS
+
+    kinds = (*KINDS, "overall")
+    t = Table("service", *(KIND_TITLES[k] for k in kinds), title="Verdicts")
+    for name, sv in assessment.services.items():
+        t.add_row(name, *(f"[{_VERDICT_STYLE[sv.get(k).verdict]}]{sv.get(k).verdict}[/]" for k in kinds))
+    console.print(t)
+    for st, per in assessment.by_station.items():
+        line = ", ".join(f"{name} {sv.overall.verdict}" for name, sv in per.items())
+        console.print(f"station {st}: {line}", highlight=False, soft_wrap=True)
+    for name, sv in assessment.services.items():
+        for k in KINDS:
+            v = sv.get(k)
+            if v.verdict != "pass":
+                console.print(
+                    f"{name} {k.replace('_', ' ')}: {v.verdict}: {v.sentence}",
+                    highlight=False,
+                    soft_wrap=True,
+                )
 
 
 _VERDICT_KEYS = ("integrity", "availability", "continuity")
@@ -727,24 +782,39 @@ def demo(out_dir, days, seed) -> None:
             [path], out_dir / "simulated", title=f"Simulated {days:g}-day 1 Hz campaign"
         )
     index = _write_index(
-        out_dir, [("USLO real WAAS day", real[1]), (f"Simulated {days:g} days", simulated[1])]
+        out_dir,
+        [("USLO real WAAS day", real[1], real[2]), (f"Simulated {days:g} days", simulated[1], simulated[2])],
     )
     click.echo(f"report: {real[1]}")
     click.echo(f"report: {simulated[1]}")
     click.echo(f"index:  {index}")
 
 
-def _write_index(out_dir: Path, reports: list[tuple[str, Path]]) -> Path:
-    import html
+def _write_index(out_dir: Path, reports: list) -> Path:
+    """``index.html``: each report's verdict matrix, styled like the reports, linking to its evidence."""
+    from overbound.report.page import PAGE_CSS, escape
+    from overbound.report.verdicts import VERDICT_CSS, matrix_html
 
-    items = "\n".join(
-        f'<li><a href="{html.escape(p.relative_to(out_dir).as_posix())}">{html.escape(name)}</a></li>'
-        for name, p in reports
-    )
+    parts = []
+    for name, path, assessment in reports:
+        href = escape(path.relative_to(out_dir).as_posix())
+        parts.append(
+            f'<section id="{escape(path.parent.name)}"><h2><a href="{href}">{escape(name)}</a></h2>'
+            f"{matrix_html(assessment.services, link=href)}"
+            f'<p><a href="{href}">Open the report</a> '
+            "(verdict evidence, KPIs, the three methods, figures).</p>"
+            "</section>"
+        )
     path = out_dir / "index.html"
     path.write_text(
-        f"<!doctype html><html lang=en><meta charset=utf-8><title>overbound demo</title>"
-        f"<h1>overbound demo</h1><ul>\n{items}\n</ul></html>\n",
+        '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
+        '<meta name="viewport" content="width=device-width, initial-scale=1">\n'
+        f"<title>overbound demo</title>\n<style>{PAGE_CSS}{VERDICT_CSS}</style>\n</head>\n<body>\n<main>\n"
+        '<header><p class="kicker">GNSS integrity verification</p><h1>overbound demo</h1>'
+        '<p class="sub">The verdict of every service level for a real WAAS day and a simulated campaign; '
+        "each cell links to the evidence it rests on.</p></header>\n"
+        + "\n".join(parts)
+        + "\n</main>\n</body>\n</html>\n",
         encoding="utf-8",
     )
     return path

@@ -117,10 +117,71 @@ def test_report_renders_in_chromium(driver, tmp_path):
     )
     assert rects[0]["top"] == rects[1]["top"] and rects[0]["right"] <= rects[1]["left"]
     badges = [b.text for b in driver.find_elements(By.CSS_SELECTOR, "#service-LPV-200 .badge")]
-    assert badges == ["PASS", "FAIL", "PASS", "PASS", "PASS"]  # the VPL excursion breaks continuity
+    assert badges == [
+        "within",
+        "outside",
+        "within",
+        "within",
+    ]  # the VPL excursion breaks continuity; no HMI badge
 
     height = driver.execute_script("return document.documentElement.scrollHeight")
     driver.set_window_size(WIDTH, min(height + 120, 16_000))
     shot = tmp_path / "report.png"
     assert driver.save_screenshot(str(shot))
     assert shot.stat().st_size > 50_000
+
+
+def test_verdicts_first_and_nothing_overflows_at_1024(driver, tmp_path):
+    """The report opens with the verdict matrix; no table or figure is wider than a 1024 px window."""
+    from selenium.webdriver.common.by import By
+
+    from overbound.simulate import SimulationConfig, simulate
+
+    sim = simulate(SimulationConfig(days=1, seed=3, anomalies=("band:15:16:3",)))
+    analysis = analyze(
+        sim.table,
+        services=["NPA", "APV-I", "LPV", "LPV-200"],
+        confidence=None,
+        evt=None,
+        parametric=True,
+        evt_n_boot=50,
+        title="Simulated day with a PL-band anomaly",
+    )
+    path = write_report(analysis, tmp_path)
+    driver.set_window_size(1024, 900)
+    driver.get(path.resolve().as_uri())
+    first = driver.execute_script("return document.querySelector('main section').id")
+    assert first == "verdicts"
+    rows = driver.find_elements(By.CSS_SELECTOR, "#verdicts table.verdicts tbody tr")
+    assert [r.get_attribute("data-service") for r in rows] == ["NPA", "APV-I", "LPV", "LPV-200"]
+    cells = driver.find_elements(By.CSS_SELECTOR, "#verdicts table.verdicts td")
+    assert len(cells) == 4 * 6
+    assert {c.get_attribute("data-verdict") for c in cells} <= {"pass", "fail", "not demonstrated"}
+    # the matrix is on the first screen, above every other section
+    top = driver.execute_script("return document.getElementById('verdicts').getBoundingClientRect().top")
+    assert 0 < top < 400
+    # every cell links to an evidence block that exists
+    for c in cells:
+        href = c.find_element(By.TAG_NAME, "a").get_attribute("href").split("#")[1]
+        assert driver.find_elements(By.ID, href), href
+    width = driver.execute_script("return document.documentElement.clientWidth")
+    assert driver.execute_script("return document.documentElement.scrollWidth") <= width
+    wide = driver.execute_script(
+        "const W = document.documentElement.clientWidth; return Array.from("
+        "document.querySelectorAll('main table, main figure, main img')).filter("
+        "e => e.getBoundingClientRect().right > W + 0.5)"
+        ".map(e => e.tagName + ' ' + (e.closest('section')||{}).id)"
+    )
+    assert wide == []
+    # the sticky navigation stays on screen while scrolling
+    driver.execute_script("window.scrollTo(0, document.body.scrollHeight / 2)")
+    nav_top = driver.execute_script("return document.querySelector('nav.sticky').getBoundingClientRect().top")
+    assert nav_top == 0
+    # no probability below 1e-15 printed as a number anywhere in the page
+    text = driver.find_element(By.TAG_NAME, "main").text
+    import re
+
+    tiny = [m for m in re.findall(r"\d(?:\.\d+)?e-(\d+)", text) if int(m) > 15]
+    assert tiny == []
+    tiny_html = re.findall(r"10\n?−(\d+)", text)
+    assert all(int(x) <= 15 for x in tiny_html), tiny_html

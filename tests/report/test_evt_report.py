@@ -118,13 +118,17 @@ def test_section_headline_counts_and_messages(analysis, section):
 def test_service_verdicts_and_no_estimate(analysis, section):
     services = _rows(section, "evt-services")
     assert list(services) == list(analysis.services)
-    words = {True: "meets", False: "does not meet", None: "no estimate"}
+    words = {
+        True: "bound within",
+        False: "bound above",
+        None: "no estimate",
+    }  # a method's reading, no verdict
     for name, h in analysis.services.items():
         assert services[name][8] == words[h.meets_requirement]
         assert services[name][9] == h.message
     assert analysis.services["TINY"].meets_requirement is None
     badges = re.findall(r'<span class="badge (\w+)" data-kpi="([^"]+)"', section)
-    kinds = {True: "pass", False: "fail", None: "na"}
+    kinds = {True: "within", False: "above", None: "na"}
     assert badges == [(kinds[h.meets_requirement], n) for n, h in analysis.services.items()]
     assert f"TINY: no HMI estimate: {analysis.services['TINY'].message}" in _text(section)
 

@@ -93,15 +93,19 @@ def _rows(html: str, cls: str) -> dict[str, list[str]]:
 
 
 def test_tiny_probabilities_are_written_from_their_log10():
-    assert mantissa_exponent(0.0, -411.9) == (round(10**0.1, 2), -412)
-    assert format_probability(0.0, -411.9) == "1.26e-412"
-    assert format_probability(1e-310, -309.5) == "3.16e-310"  # subnormal: below 1e-300, from the log
+    assert mantissa_exponent(0.0, -411.9) == (round(10**0.1, 2), -412)  # the exact value: the JSON's
+    assert mantissa_exponent(1e-310, -309.5) == (3.16, -310)  # subnormal: below 1e-300, from the log
+    # printed: nothing below 1e-15 as a number (issue 12), but never 0 for a positive value
+    assert format_probability(0.0, -411.9) == "< 1e-15"
+    assert format_probability(1e-310, -309.5) == "< 1e-15"
     assert format_probability(2.5e-7, -6.6) == "2.5e-07"  # a float64 value: its own digits
+    assert format_probability(1.2e-15) == "1.2e-15" and format_probability(9.9e-16) == "< 1e-15"
     assert format_probability(0.0123) == "0.0123"
     assert format_probability(0.0) == "0" and format_probability(None) == "n.a."
     assert mantissa_exponent(9.9999e-5) == (1.0, -4)  # rounding carries into the exponent
-    assert _h_p(0.0, -411.9) == "1.26·10<sup>−412</sup>"
+    assert _h_p(0.0, -411.9) == "&lt;&nbsp;10<sup>−15</sup>"
     assert _h_p(3e-8, -7.52) == "3·10<sup>−8</sup>"  # report.page.scientific
+    assert _h_p(3e-20, -19.5) == "&lt;&nbsp;10<sup>−15</sup>"
 
 
 @pytest.fixture(scope="module")
@@ -116,9 +120,8 @@ def test_tiny_p_mi_is_shown_from_log10_never_as_zero(tiny):
     v = a.vertical
     assert v.p_mi == 0.0 and v.log10_p_mi < -300  # underflows a float64
     html = parametric_section_html(a)  # no table: the figures from the epochs are skipped
-    e = math.floor(v.log10_p_mi)
     lead = re.search(r"<p>Kannemans.*?</p>", html, re.S).group(0)
-    assert f"·10<sup>−{-e}</sup> per epoch" in lead
+    assert "&lt;&nbsp;10<sup>−15</sup> per epoch" in lead  # below the print floor, never 0
     assert "= 0 per" not in lead
     fits = _rows(html, "parametric-fits")
     assert fits["P MI per epoch"][0] == _h_p(0.0, v.log10_p_mi)
@@ -291,7 +294,7 @@ def test_section_summary_verdicts_and_tables(analysis, section):
         expected = [n for n, s in a.services.items() if s is not None]
         assert list(summary) == expected
         badges = re.findall(r'<span class="badge (\w+)" data-kpi="([^"]+)"', part)
-        kind = {True: "pass", False: "fail", None: "na"}
+        kind = {True: "within", False: "above", None: "na"}
         want = []
         for name in expected:
             v = service_verdicts(a, levels[name])

@@ -246,3 +246,17 @@ def test_jackknife_gpd_equals_leave_one_out_fits(xi, n):
         f = fit_gpd(np.delete(y, i))
         assert jxi[i] == pytest.approx(f.xi, abs=1e-7)
         assert jsig[i] == pytest.approx(f.sigma, rel=1e-7)
+
+
+def test_bca_acceleration_is_scale_free_down_to_underflow():
+    # jackknife values of a P_MI near 1e-200: their cubed deviations underflow a float64; the
+    # acceleration is scale-free and must not divide by zero (seen in the verdict validation)
+    from overbound.stats.bootstrap import bca_ci
+
+    rng = np.random.default_rng(3)
+    samples = rng.lognormal(0.0, 1.0, 500)
+    jack = rng.lognormal(0.0, 0.3, 40)
+    ref = bca_ci(samples, 1.0, jack, 0.95)
+    tiny = bca_ci(samples * 1e-200, 1e-200, jack * 1e-200, 0.95)
+    assert tiny[0] == pytest.approx(ref[0] * 1e-200, rel=1e-9)
+    assert tiny[1] == pytest.approx(ref[1] * 1e-200, rel=1e-9)

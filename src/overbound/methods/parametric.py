@@ -932,7 +932,7 @@ def parametric_dict(analysis: ParametricAnalysis) -> dict:
 
 def write_parametric(analysis: ParametricAnalysis, path: str | Path) -> str:
     """Write :func:`parametric_dict` as deterministic JSON (``report.json.dumps``); return the text."""
-    from overbound.report.json import dumps  # lazy: report.json imports overbound.analysis
+    from overbound.jsontext import dumps
 
     text = dumps(parametric_dict(analysis))
     Path(path).write_text(text, encoding="utf-8")

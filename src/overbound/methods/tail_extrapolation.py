@@ -25,8 +25,8 @@ import numpy as np
 import polars as pl
 
 from overbound.io.schema import InputError
+from overbound.jsontext import dumps
 from overbound.methods.pooling import PooledEpochs, pool_epochs
-from overbound.report.json import dumps
 from overbound.services import K_H_PA, K_V_PA, SERVICES, ServiceLevel, parse_service
 from overbound.stats.bootstrap import (
     bca_ci,

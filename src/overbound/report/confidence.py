@@ -25,6 +25,7 @@ from matplotlib.axes import Axes
 from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator
 
 from overbound import __version__
+from overbound.jsontext import dumps
 from overbound.methods.confidence_level import (
     SUSPECT_BELOW,
     ConfidenceAnalysis,
@@ -32,7 +33,6 @@ from overbound.methods.confidence_level import (
     confidence_analysis,
 )
 from overbound.report.figures import new_figure, style
-from overbound.report.json import dumps
 from overbound.report.page import escape, figure_html, section_html, write_page
 from overbound.stats.overbounding import SigmaInflation
 

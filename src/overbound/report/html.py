@@ -43,11 +43,13 @@ from overbound.report.figures import (
     plot_stanford,
     plot_timeseries,
 )
-from overbound.report.json import dumps, summary_dict
+from overbound.report.json import base_names, dumps, summary_dict
 from overbound.report.page import PAGE_CSS, escape, figure_html, scientific, section_html
 from overbound.report.parametric import parametric_section_html
 from overbound.report.parametric import section_ids as parametric_ids
+from overbound.report.verdicts import VERDICT_CSS, verdict_section
 from overbound.services import ServiceLevel
+from overbound.verdict import Assessment, assess
 
 __all__ = ["REPORT_NAME", "render_report", "section_ids", "write_report"]
 
@@ -63,6 +65,7 @@ def write_report(
     directory: str | Path,
     *,
     summary: dict | None = None,
+    assessment: Assessment | None = None,
 ) -> Path:
     """Write ``report.html`` into ``directory`` (created if needed); return its path.
 
@@ -82,13 +85,14 @@ def write_report(
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     path = directory / REPORT_NAME
-    path.write_bytes(render_report(analysis, summary=summary).encode("utf-8"))
+    path.write_bytes(render_report(analysis, summary=summary, assessment=assessment).encode("utf-8"))
     return path
 
 
 def section_ids(analysis: Analysis) -> tuple[str, ...]:
     """The ``id`` of every ``<section>`` of the report of ``analysis``, in page order."""
     return (
+        "verdicts",
         "overview",
         "accuracy",
         *(("stations",) if analysis.counting.by_station else ()),
@@ -102,12 +106,16 @@ def section_ids(analysis: Analysis) -> tuple[str, ...]:
     )
 
 
-def render_report(analysis: Analysis, *, summary: dict | None = None) -> str:
-    """The text of ``report.html`` (see :func:`write_report`)."""
-    doc = summary if summary is not None else summary_dict(analysis)
+def render_report(
+    analysis: Analysis, *, summary: dict | None = None, assessment: Assessment | None = None
+) -> str:
+    """The text of ``report.html`` (see :func:`write_report`): the verdicts first, then the details."""
+    assessment = assessment if assessment is not None else assess(analysis)
+    doc = summary if summary is not None else summary_dict(analysis, assessment=assessment)
     c = analysis.counting
     body = [
         _header(analysis),
+        verdict_section(assessment),
         _overview(analysis),
         _accuracy(c),
         *((_stations(analysis),) if c.by_station else ()),
@@ -135,7 +143,7 @@ def render_report(analysis: Analysis, *, summary: dict | None = None) -> str:
         '<meta name="viewport" content="width=device-width, initial-scale=1">\n'
         f'<meta name="generator" content="overbound {_e(__version__)}">\n'
         f"<title>{_e(analysis.title)} — overbound integrity report</title>\n"
-        f"<style>{PAGE_CSS}</style>\n</head>\n<body>\n<main>\n"
+        f"<style>{PAGE_CSS}{VERDICT_CSS}</style>\n</head>\n<body>\n<main>\n"
         + "\n".join(body)
         + "\n</main>\n</body>\n</html>\n"
     )
@@ -167,7 +175,8 @@ def _h_share(x: float) -> str:
 
 
 def _h_badge(passed: bool | None, kpi: str, note: str = "") -> str:
-    kind, text = {True: ("pass", "PASS"), False: ("fail", "FAIL"), None: ("na", "n.a.")}[passed]
+    # the point estimate against the requirement; the verdicts (with bounds) open the report
+    kind, text = {True: ("within", "within"), False: ("above", "outside"), None: ("na", "n.a.")}[passed]
     title = f' title="{_e(note)}"' if note else ""
     return f'<span class="badge {kind}" data-kpi="{_e(kpi)}"{title}>{text}</span>'
 
@@ -217,6 +226,7 @@ def _header(a: Analysis) -> str:
     links = "".join(
         f'<li><a href="#{_e(sid)}">{_e(label)}</a></li>'
         for sid, label in [
+            ("verdicts", "Verdicts"),
             ("overview", "Overview"),
             ("accuracy", "Accuracy"),
             *((_service_id(s), s.name) for s in a.services),
@@ -233,9 +243,9 @@ def _header(a: Analysis) -> str:
     )
     return (
         f'<header><p class="kicker">GNSS integrity verification report</p><h1>{_e(a.title)}</h1>'
-        f'<p class="sub">overbound {_e(__version__)} · counting KPIs for '
-        f"{_e(', '.join(s.name for s in a.services))} · all times GPS time</p>"
-        f'<nav aria-label="Contents"><ul>{links}</ul></nav></header>'
+        f'<p class="sub">overbound {_e(__version__)} · verdicts for '
+        f"{_e(', '.join(s.name for s in a.services))} · all times GPS time</p></header>"
+        f'<nav class="sticky" aria-label="Contents"><ul>{links}</ul></nav>'
     )
 
 
@@ -292,7 +302,7 @@ def _overview(a: Analysis) -> str:
             ],
             [
                 [
-                    f"<code>{_e(r.source)}</code>",
+                    f"<code>{_e(base_names(r.source))}</code>",
                     _e(r.format),
                     _num(f"{r.rows_read:,}"),
                     _num(f"{r.rows_kept:,}"),
@@ -311,7 +321,7 @@ def _overview(a: Analysis) -> str:
             if not rows:
                 rows = [("none", "no row rejected or invalidated", 0)]
             drops += [
-                [f"<code>{_e(r.source)}</code>", _e(kind), _e(reason), _num(f"{n:,}")]
+                [f"<code>{_e(base_names(r.source))}</code>", _e(kind), _e(reason), _num(f"{n:,}")]
                 for kind, reason, n in rows
             ]
         total_inv = sum(sum(r.invalidated.values()) for r in a.reports)
@@ -351,7 +361,7 @@ def _accuracy(c: CountingResult) -> str:
                 _num(_h_m(p95)),
                 _num(f"{si.n:,}"),
                 _num(_h_ratio(si.max)),
-                _e(si.time_of_max or "n.a."),
+                _e((si.time_of_max or "n.a.").replace("T", " ")),
                 *(_num(_h_ratio(si.percentiles[k])) for k in keys),
             ]
         )
@@ -492,8 +502,10 @@ def _kpi_rows(a: Analysis, s: ServiceLevel, k: ServiceKPI) -> list[list[str]]:
                 _e(axis),
                 _num(shown),
                 counts or _e(note),
-                _num(_requirement(v)),
-                _h_badge(v.passed, v.kpi, note),
+                _num(_requirement(v) if v.required is not None or not v.kpi.endswith("(counted)") else "—"),
+                _h_badge(v.passed, v.kpi, note)
+                if v.passed is not None or not v.kpi.endswith("(counted)")
+                else '<a href="#verdicts">see the verdicts</a>',
             ]
         )
 
@@ -584,7 +596,7 @@ def _service(a: Analysis, s: ServiceLevel) -> str:
         f"<br><small>Requirements: {_e(s.source or 'user-defined')}</small></p>"
     )
     kpis = _table(
-        ["KPI", "Axis", _num("Value"), "Counts / note", _num("Requirement"), "Verdict"],
+        ["KPI", "Axis", _num("Value"), "Counts / note", _num("Requirement"), "Estimate vs requirement"],
         _kpi_rows(a, s, k),
         cls="kpi",
     )

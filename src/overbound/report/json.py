@@ -11,52 +11,37 @@ bound per approach, each service's verdict and the message; ``null`` numbers and
 message when the axis could not be analysed); the full documents are ``evt-<axis>.json``;
 ``parametric`` the parametric analysis (Kannemans 2006) in brief
 (:func:`overbound.report.parametric.parametric_brief`; ``{}`` when not run), the full document
-being ``parametric.json``.
+being ``parametric.json``. ``verdicts`` holds, per service, the five verdicts and the overall one of
+:mod:`overbound.verdict` (``verdicts_by_station`` the same per station when there are several);
+``provenance`` the overbound version, the command line, the options and each input's base name, size
+and SHA-256. No absolute path is written anywhere.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import json
-import math
+import hashlib
 from pathlib import Path
-from typing import Any
-
-import numpy as np
 
 from overbound import __version__
 from overbound.analysis import Analysis, verdicts
+from overbound.jsontext import dumps, to_jsonable
 from overbound.methods.counting import AXES, AxisKPI, ContinuityResult, CountingResult, ServiceKPI
+from overbound.verdict import KINDS, Assessment, ServiceVerdicts, assess
 
-__all__ = ["SCHEMA", "dumps", "summary_dict", "to_jsonable", "write_summary"]
+__all__ = [
+    "SCHEMA",
+    "base_names",
+    "dumps",
+    "file_digest",
+    "provenance_dict",
+    "summary_dict",
+    "to_jsonable",
+    "verdicts_dict",
+    "write_summary",
+]
 
 SCHEMA = "overbound.summary/1"
-_DIGITS = 12
-
-
-def to_jsonable(obj: Any) -> Any:
-    """Plain JSON types: dataclasses to dicts, numpy scalars to Python, NaN to None, floats to 12 digits."""
-    if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
-        return {f.name: to_jsonable(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
-    if isinstance(obj, dict):
-        return {str(k): to_jsonable(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [to_jsonable(v) for v in obj]
-    if isinstance(obj, np.ndarray):
-        return [to_jsonable(v) for v in obj.tolist()]
-    if isinstance(obj, bool | np.bool_):
-        return bool(obj)
-    if isinstance(obj, int | np.integer):
-        return int(obj)
-    if isinstance(obj, float | np.floating):
-        x = float(obj)
-        return float(f"{x:.{_DIGITS}g}") if math.isfinite(x) else None
-    return obj
-
-
-def dumps(doc: dict) -> str:
-    """Deterministic JSON text (sorted keys, two-space indent, trailing newline)."""
-    return json.dumps(to_jsonable(doc), sort_keys=True, indent=2, allow_nan=False) + "\n"
 
 
 def _continuity(c: ContinuityResult | None) -> dict | None:
@@ -99,9 +84,68 @@ def _station_dict(c: CountingResult, services) -> dict:
     }
 
 
-def summary_dict(analysis: Analysis) -> dict:
-    """The ``summary.json`` document of an :class:`~overbound.analysis.Analysis`."""
+def verdicts_dict(services: dict[str, ServiceVerdicts]) -> dict:
+    """``{SERVICE: {availability, continuity, accuracy, integrity, pl_bounding, overall}}``, each
+    ``{verdict, requirement, basis, sentence, evidence: [...]}`` (:mod:`overbound.verdict`)."""
+    return {name: {k: to_jsonable(sv.get(k)) for k in (*KINDS, "overall")} for name, sv in services.items()}
+
+
+def file_digest(path: str | Path) -> dict:
+    """``{name, size, sha256}`` of an input file: its base name only (the same JSON from any folder)."""
+    path = Path(path)
+    h = hashlib.sha256()
+    with path.open("rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return {"name": path.name, "size": path.stat().st_size, "sha256": h.hexdigest()}
+
+
+def provenance_dict(
+    inputs: list[str | Path] | tuple = (), command: list[str] | None = None, options: dict | None = None
+) -> dict:
+    """The ``provenance`` object: overbound version, the command line (paths reduced to their base
+    names), the options, and each input file's base name, size and SHA-256."""
+    files = [file_digest(p) for p in inputs if isinstance(p, str | Path) and Path(p).is_file()]
+    return {
+        "overbound_version": __version__,
+        "command": None if command is None else [_base(a) for a in command],
+        "options": {k: _base_value(v) for k, v in (options or {}).items()},
+        "inputs": files,
+    }
+
+
+def _base(arg: str) -> str:
+    """A command-line word with any path reduced to its base name (``-o/x/out`` -> ``-oout``)."""
+    if "=" in arg and arg.startswith("--"):
+        key, value = arg.split("=", 1)
+        return f"{key}={_base(value)}"
+    if "/" in arg or "\\" in arg:
+        return Path(arg).name or arg
+    return arg
+
+
+def _base_value(v):
+    if isinstance(v, Path):
+        return v.name
+    if isinstance(v, list | tuple):
+        return [_base_value(x) for x in v]
+    if isinstance(v, str):
+        return _base(v)
+    return v
+
+
+def summary_dict(
+    analysis: Analysis, *, assessment: Assessment | None = None, provenance: dict | None = None
+) -> dict:
+    """The ``summary.json`` document of an :class:`~overbound.analysis.Analysis`.
+
+    ``verdicts`` (and ``verdicts_by_station`` with several stations) are :func:`overbound.verdict.assess`
+    of the analysis (computed when ``assessment`` is ``None``); ``provenance`` is
+    :func:`provenance_dict` (version only when ``None``). No absolute path is written: inputs appear by
+    their base names, so the same data in another folder give the same bytes.
+    """
     c = analysis.counting
+    assessment = assessment if assessment is not None else assess(analysis)
     services = {}
     for s in analysis.services:
         k = c.services[s.name]
@@ -132,7 +176,10 @@ def summary_dict(analysis: Analysis) -> dict:
         "schema": SCHEMA,
         "overbound_version": __version__,
         "title": analysis.title,
-        "inputs": [r.to_dict() for r in analysis.reports],
+        "inputs": [_input_dict(r) for r in analysis.reports],
+        "verdicts": verdicts_dict(assessment.services),
+        "verdicts_by_station": {st: verdicts_dict(per) for st, per in assessment.by_station.items()},
+        "provenance": provenance if provenance is not None else provenance_dict(),
         "epochs": {
             "total": c.n_total,
             "with_solution": c.n_with_solution,
@@ -149,6 +196,18 @@ def summary_dict(analysis: Analysis) -> dict:
         "evt": _evt_briefs(analysis),
         "parametric": _parametric_brief(analysis),
     }
+
+
+def base_names(source: str) -> str:
+    """A source text (``a/b.pos, c/d.pos``) with every path reduced to its base name."""
+    return ", ".join(Path(p.strip()).name or p.strip() for p in str(source).split(","))
+
+
+def _input_dict(report) -> dict:
+    """A read report with its source reduced to base names."""
+    d = report.to_dict()
+    d["source"] = base_names(d.get("source", ""))
+    return d
 
 
 def _parametric_brief(analysis: Analysis) -> dict:
@@ -194,8 +253,15 @@ def _evt_briefs(analysis: Analysis) -> dict:
     return out
 
 
-def write_summary(analysis: Analysis, path: str | Path) -> Path:
+def write_summary(
+    analysis: Analysis,
+    path: str | Path,
+    *,
+    assessment: Assessment | None = None,
+    provenance: dict | None = None,
+) -> Path:
     """Write ``summary.json``; return its path."""
     path = Path(path)
-    path.write_text(dumps(summary_dict(analysis)), encoding="utf-8")
+    doc = summary_dict(analysis, assessment=assessment, provenance=provenance)
+    path.write_text(dumps(doc), encoding="utf-8")
     return path

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from matplotlib.axes import Axes
 
+from overbound.numbers import PRINT_FLOOR
 from overbound.report.figures import close_figure, figure_png
 
 __all__ = [
@@ -82,9 +83,11 @@ dl.facts dd{margin:0;font-variant-numeric:tabular-nums}
 table{border-collapse:collapse;margin:6px 0 12px;font-size:.9rem;font-variant-numeric:tabular-nums;width:100%}
 caption{caption-side:bottom;text-align:left;color:var(--muted);font-size:.8rem;padding-top:4px}
 th,td{border-bottom:1px solid var(--line);padding:4px 8px;text-align:left;vertical-align:top}
-th{background:var(--band);font-weight:600;border-bottom:2px solid var(--line);white-space:nowrap}
+th{background:var(--band);font-weight:600;border-bottom:2px solid var(--line)}
+td code{overflow-wrap:anywhere}
 tbody tr:nth-child(even){background:#fafbfc}
 .num{text-align:right;white-space:nowrap}
+th.num{white-space:normal}
 td small{color:var(--muted)}
 .alarm{color:var(--fail);font-weight:700}
 tr.suspect{background:var(--fail-bg)}
@@ -93,6 +96,8 @@ font-weight:700;font-size:.78rem;letter-spacing:.04em;border:1px solid}
 .badge.pass{color:var(--pass);background:var(--pass-bg);border-color:var(--pass)}
 .badge.fail{color:var(--fail);background:var(--fail-bg);border-color:var(--fail)}
 .badge.na{color:var(--na);background:var(--na-bg);border-color:#b8c0c8}
+.badge.within{color:var(--accent);background:#fff;border-color:var(--accent);font-weight:600}
+.badge.above{color:#8a4b00;background:#fff;border-color:#c77d1a;font-weight:600}
 .limits{color:var(--muted)}
 .swatch{display:inline-block;width:.9em;height:.9em;border:1px solid #999;margin:0 3px 0 8px;
 vertical-align:-1px}
@@ -126,6 +131,8 @@ def scientific(x: float | None) -> str:
         return "0"
     if 1e-3 <= abs(x) < 1e4:
         return f"{x:.4g}"
+    if 0 < x < PRINT_FLOOR:  # no probability below 1e-15 is printed as a number
+        return "&lt;&nbsp;10<sup>−15</sup>"
     exp = math.floor(math.log10(abs(x)))
     mant = x / 10.0**exp
     if round(mant, 2) >= 10:
@@ -133,8 +140,10 @@ def scientific(x: float | None) -> str:
     return f"{mant:.3g}·10<sup>{'−' if exp < 0 else ''}{abs(exp)}</sup>"
 
 
-#: Badge class and text of a verdict (``None``: no estimate).
-VERDICT = {True: ("pass", "meets"), False: ("fail", "does not meet"), None: ("na", "no estimate")}
+#: Badge class and text of one method's own reading of its bound against a requirement (``None``: no
+#: estimate). Not a verdict: the verdicts (:mod:`overbound.verdict`) weigh every method with the counts
+#: and the adequacy tests, so the method sections say "bound within/above", never "pass".
+VERDICT = {True: ("within", "bound within"), False: ("above", "bound above"), None: ("na", "no estimate")}
 
 
 def percent(level: float) -> str:
@@ -150,7 +159,7 @@ def row_table(head: Sequence[str], rows: Sequence[Sequence[str]], cls: str) -> s
 
 
 def badge(meets: bool | None, name: str, note: str) -> str:
-    """A pass / fail / no-estimate badge for the KPI ``name``, ``note`` as its tooltip."""
+    """A method's "bound within / bound above / no estimate" badge for ``name``, ``note`` as its tooltip."""
     kind, text = VERDICT[meets]
     return f'<span class="badge {kind}" data-kpi="{escape(name)}" title="{escape(note)}">{text}</span>'
 

@@ -273,6 +273,8 @@ def _h_p(p: float | None, lg: float | None = None) -> str:
     if me is None:
         return "0" if p == 0 else "n.a."
     m, e = me
+    if e < -15:  # not printed as a number (overbound.numbers.PRINT_FLOOR)
+        return "&lt;&nbsp;10<sup>−15</sup>"
     return f"{m:.3g}·10<sup>{'−' if e < 0 else ''}{abs(e)}</sup>"
 
 

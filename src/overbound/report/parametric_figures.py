@@ -35,6 +35,7 @@ from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator
 from matplotlib.transforms import blended_transform_factory
 from scipy import special
 
+from overbound.numbers import TINY, format_probability, mantissa_exponent
 from overbound.report.figures import envelope, new_figure, style
 from overbound.stats.continuity import ContinuityCurve, LogLinearFit
 from overbound.stats.parametric import (
@@ -66,8 +67,6 @@ __all__ = [
 
 #: Contour levels of :func:`plot_pe_pl_contours`, relative to the maximum density (Kannemans, figure 11).
 CONTOUR_LEVELS: tuple[float, ...] = (1e-10, 1e-5, 1e-3, 0.01, 0.1, 0.5, 1.0)
-#: Below this a probability is written from its log10 (a float64 has no room for it).
-TINY = 1e-300
 _DATA_COLOUR = "#1f5fa8"
 _MODEL_COLOUR = "#d9711c"
 _MARK_COLOUR = "#c0201a"
@@ -87,49 +86,6 @@ _HIST_BINS = 120
 
 # ---------------------------------------------------------------------------
 # probabilities as text
-
-
-def mantissa_exponent(p: float | None, log10_p: float | None = None) -> tuple[float, int] | None:
-    r"""``(m, e)`` with :math:`p = m \cdot 10^e`, :math:`1 \le m < 10`; from ``log10_p`` when ``p`` is tiny.
-
-    ``p`` below :data:`TINY` (or 0, or ``None``) is taken from ``log10_p`` when that is finite, so a
-    probability that underflows a float64 keeps its order of magnitude. ``None`` when neither gives
-    a positive finite value (a true 0 has ``log10_p = -inf``). The mantissa is rounded to three
-    significant digits (9.996 becomes 1.00 of the next decade).
-
-    >>> mantissa_exponent(0.0, -411.9)
-    (1.26, -412)
-    >>> mantissa_exponent(2.5e-7)
-    (2.5, -7)
-    """
-    if p is not None and math.isfinite(p) and p >= TINY:
-        lg = math.log10(p)
-    elif log10_p is not None and math.isfinite(log10_p):
-        lg = float(log10_p)
-    else:
-        return None
-    e = math.floor(lg)
-    m = round(10.0 ** (lg - e), 2)
-    if m >= 10.0:
-        m, e = round(m / 10.0, 2), e + 1
-    return m, e
-
-
-def format_probability(p: float | None, log10_p: float | None = None) -> str:
-    """A probability as plain text: ``0.0123`` down to 0.001, else ``1.23e-55``; ``1.26e-412`` from log10.
-
-    ``0`` only for a true zero (``p == 0`` with no finite ``log10_p``), ``n.a.`` for ``None``/NaN.
-
-    >>> format_probability(0.0, -411.9), format_probability(0.0123), format_probability(3e-8)
-    ('1.26e-412', '0.0123', '3e-08')
-    """
-    if p is not None and math.isfinite(p) and 1e-3 <= p:
-        return f"{p:.3g}"
-    me = mantissa_exponent(p, log10_p)
-    if me is None:
-        return "0" if p == 0 else "n.a."
-    m, e = me
-    return f"{m:g}e{e:+03d}" if e > -100 else f"{m:g}e{e}"
 
 
 # ---------------------------------------------------------------------------

@@ -180,7 +180,7 @@ def _sparse(h: StanfordHistogram) -> dict:
 
 def write_subsets(product: SubsetsProduct, run: SbasRun, path: str | Path) -> tuple[Path, Path]:
     """Write ``NAME.subsets.json`` and ``NAME.subsets.png`` next to the epoch table ``path``."""
-    from overbound.report.json import dumps
+    from overbound.jsontext import dumps
 
     json_path = product_path(path, "subsets", ".json")
     png_path = product_path(path, "subsets", ".png")

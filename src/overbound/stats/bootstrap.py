@@ -179,6 +179,8 @@ def bca_ci(
     jk = np.asarray(jackknife, dtype=float)
     jk = jk[np.isfinite(jk)]
     d = jk.mean() - jk if jk.size else jk
+    scale = float(np.max(np.abs(d))) if d.size else 0.0
+    d = d / scale if scale > 0 else d  # a is scale-free; tiny jackknife values (p ~ 1e-200) underflow d**3
     ss = float(np.sum(d * d))
     a = float(np.sum(d**3)) / (6.0 * ss**1.5) if ss > 0 else 0.0
     z = ndtri(np.array([(1.0 - level) / 2.0, (1.0 + level) / 2.0]))
