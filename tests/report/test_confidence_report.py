@@ -155,7 +155,10 @@ def test_section_html(analysis, monkeypatch):
     text = confidence_section_html(analysis)
     assert text.startswith('<section id="confidence-vertical">\n<h2>Vertical PL confidence level</h2>')
     rows = re.findall(r'<tr( class="suspect")? data-bin="(\d+)">', text)
-    assert len(rows) == sum(b.n > 0 for b in analysis.bins)
+    # only the bands with a confidence level are listed; the others are counted in one line
+    assert len(rows) == sum(b.sufficient for b in analysis.bins)
+    few = sum(b.n > 0 and not b.sufficient for b in analysis.bins)
+    assert f'<p class="few-bands">{few} further bands' in text
     assert {int(i) for cls, i in rows if cls} == set(analysis.suspect)
     assert text.count('<span class="alarm">suspect</span>') == len(analysis.suspect)
     # the CL figure, then histogram + figure 8 for at most 2 suspect bins (the lowest CLs) and the worst

@@ -218,49 +218,53 @@ def quantile_bounds(x: np.ndarray, q: float, n_effective: float, confidence: flo
 
 @dataclass(frozen=True, slots=True)
 class _Arrays:
-    time_s: np.ndarray
+    """Views of one station's columns (copies only where a value changes: |VPE|, alerted PLs)."""
+
+    t_us: np.ndarray
     pe: dict[str, np.ndarray]
     pl: dict[str, np.ndarray]  # alerted epochs: inf
-    si: dict[str, np.ndarray]  # safety index, NaN without solution or alerted
+    alert: np.ndarray | None
     solution: np.ndarray
     interval_s: float | None
+
+    def si(self, axis: str) -> np.ndarray:
+        """Safety index PE/PL; NaN without a solution, with PL <= 0 or alerted."""
+        pe, pl_ = self.pe[axis], self.pl[axis]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = pe / pl_
+        bad = ~(np.isfinite(pe) & (pl_ > 0) & np.isfinite(pl_))
+        if self.alert is not None:
+            bad |= self.alert
+        s[bad] = np.nan
+        return s
 
 
 def _arrays(table: pl.DataFrame, rows) -> _Arrays:
     t_us = as_numpy(table["time"])[rows]
     pe = {"horizontal": as_numpy(table["hpe"])[rows], "vertical": np.abs(as_numpy(table["vpe"])[rows])}
     pls = {"horizontal": as_numpy(table["hpl"])[rows], "vertical": as_numpy(table["vpl"])[rows]}
-    solution = np.ones(t_us.size, dtype=bool)
-    for a in _AXES:
-        solution &= np.isfinite(pe[a]) & np.isfinite(pls[a])
+    solution = np.isfinite(pe["horizontal"]) & np.isfinite(pls["horizontal"])
+    solution &= np.isfinite(pe["vertical"]) & np.isfinite(pls["vertical"])
     alert = None
-    if "alert" in table.columns:
+    if "alert" in table.columns and table["alert"].any():
         alert = as_numpy(table["alert"].fill_null(False))[rows]
-    si = {}
-    for a in _AXES:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = pe[a] / pls[a]
-        bad = ~(np.isfinite(pe[a]) & (pls[a] > 0))
-        if alert is not None:
-            bad |= alert
-            pls[a] = np.where(alert & ~np.isnan(pls[a]), np.inf, pls[a])
-        si[a] = np.where(bad, np.nan, s)
+        pls = {a: np.where(alert & ~np.isnan(x), np.inf, x) for a, x in pls.items()}
     step = nominal_interval_us(t_us)
-    return _Arrays(t_us / 1e6, pe, pls, si, solution, None if step is None else step / 1e6)
+    return _Arrays(t_us, pe, pls, alert, solution, None if step is None else step / 1e6)
 
 
 def _tail_counts(d: _Arrays, axis: str, gap_s: float) -> TailCounts:
-    si = d.si[axis]
+    si = d.si(axis)
     ok = ~np.isnan(si)
     n = int(np.count_nonzero(ok))
     epochs, clusters = [], []
     for level in SI_LEVELS:  # three levels
-        above = ok & (si > level)
+        above = si > level  # NaN compares False
         epochs.append(int(np.count_nonzero(above)))
-        clusters.append(run_clusters(d.time_s[above], gap_s))
+        clusters.append(run_clusters(d.t_us[above] / 1e6, gap_s))
     if n:
         i = int(np.nanargmax(si))
-        mx, tmax = float(si[i]), _iso(d.time_s[i])
+        mx, tmax = float(si[i]), _iso(d.t_us[i] / 1e6)
     else:
         mx, tmax = None, None
     return TailCounts(axis, SI_LEVELS, n, tuple(epochs), tuple(clusters), mx, tmax, gap_s)
@@ -277,8 +281,8 @@ def _events(d: _Arrays, axis: str, al: float, gap_s: float) -> tuple[CountedEven
     mi = avail & (pe > pl_)
     hmi = avail & (pe > al)
     return (
-        CountedEvents(int(np.count_nonzero(mi)), run_clusters(d.time_s[mi], gap_s), exposure, gap_s),
-        CountedEvents(int(np.count_nonzero(hmi)), run_clusters(d.time_s[hmi], gap_s), exposure, gap_s),
+        CountedEvents(int(np.count_nonzero(mi)), run_clusters(d.t_us[mi] / 1e6, gap_s), exposure, gap_s),
+        CountedEvents(int(np.count_nonzero(hmi)), run_clusters(d.t_us[hmi] / 1e6, gap_s), exposure, gap_s),
     )
 
 
@@ -315,7 +319,7 @@ def _station(
     for s in services:
         avail = _available(d, s)
         n_eff, tau_s, assumed = effective_size(avail, interval, fallback_s)
-        events = loss_events(d.time_s, avail, interval, s.continuity_window_s)
+        events = loss_events(d.t_us / 1e6, avail, interval, s.continuity_window_s)
         partial[s.name] = _Partial(avail.size, n_eff, tau_s, assumed, events)
         mi, hmi = {}, {}
         for a in _AXES:
@@ -337,7 +341,7 @@ def _station(
         partial[("accuracy", a)] = (x, n_eff)
         acc[a] = quantile_bounds(x, 0.95, n_eff, confidence)
     tails = {a: _tail_counts(d, a, gap_s) for a in _AXES}
-    ev = StationEvidence(name, int(d.time_s.size), d.interval_s, acc, tails, out)
+    ev = StationEvidence(name, int(d.t_us.size), d.interval_s, acc, tails, out)
     return ev, partial
 
 

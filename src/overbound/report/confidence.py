@@ -423,7 +423,7 @@ def _detail_bins(analysis: ConfidenceAnalysis) -> list[int]:
 def _bin_rows(analysis: ConfidenceAnalysis) -> list[str]:
     rows = []
     for i, b in enumerate(analysis.bins):
-        if b.n == 0:
+        if not b.sufficient:  # no confidence level: counted in one line under the table
             continue
         flags = []
         if b.suspect:
@@ -517,10 +517,19 @@ def confidence_section_html(analysis: ConfidenceAnalysis) -> str:
             "",
         ]
         thead = "".join(f"<th>{_e(h)}</th>" for h in head)
+        few = [b for b in a.bins if 0 < b.n and not b.sufficient]
         parts.append(
             f'<table class="confidence-bins"><thead><tr>{thead}</tr></thead>\n<tbody>\n'
             + "\n".join(_bin_rows(a))
             + "\n</tbody></table>"
+            + (
+                f'<p class="few-bands">{len(few)} further bands ({pl_name} '
+                f"{min(b.lo for b in few):.2f}–{max(b.hi for b in few):.2f} m) hold fewer than "
+                f"{a.min_samples} samples {a.spacing:g} s apart and have no confidence level; they are in "
+                f"<code>{_e(json_name(axis))}</code>.</p>"
+                if few
+                else ""
+            )
         )
     for i in _detail_bins(a):
         b, s = a.bins[i], a.samples[i]
