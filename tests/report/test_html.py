@@ -15,7 +15,7 @@ import pytest
 
 from overbound.analysis import Analysis, analyze, verdicts
 from overbound.io.schema import ReadReport
-from overbound.report.html import REPORT_NAME, render_report, section_ids, write_report
+from overbound.report.html import REPORT_NAME, render_report, section_ids, service_groups, write_report
 from overbound.report.json import summary_dict
 
 T0 = np.datetime64("2006-12-27T00:00:00", "us")
@@ -397,3 +397,14 @@ def test_gh2_stations_section_for_several_stations(tmp_path):
     assert doc["stations"]["B"]["services"]["LPV"]["availability"]["combined"] == 0.0
     assert doc["services"]["LPV"]["availability"]["combined"] == 0.5
     assert doc["stations"]["B"]["epochs"] == {"total": n, "with_solution": n}
+
+
+def test_services_sharing_every_number_share_one_section():
+    a = analyze(epochs(), services=["APV-I", "LPV", "LPV-200"])
+    assert [[s.name for s in g] for g in service_groups(a.services)] == [["APV-I", "LPV"], ["LPV-200"]]
+    text = render_report(a)
+    page = Page(text)
+    assert [s for s in page.sections if s.startswith("service-")] == ["service-APV-I", "service-LPV-200"]
+    assert page.h2["service-APV-I"] == "APV-I and LPV"
+    assert '<span id="service-LPV"></span>' in text  # links to LPV still land on its numbers
+    assert "TTA APV-I 10 s, LPV 6 s" in text

@@ -96,7 +96,7 @@ def section_ids(analysis: Analysis) -> tuple[str, ...]:
         "overview",
         "accuracy",
         *(("stations",) if analysis.counting.by_station else ()),
-        *(_service_id(s) for s in analysis.services),
+        *(_service_id(group[0]) for group in service_groups(analysis.services)),
         *(f"confidence-{c.axis}" for c in analysis.confidence),
         *(f"evt-{axis}" for axis, _ in _evt_items(analysis)),
         *(parametric_ids() if analysis.parametric is not None else ()),
@@ -119,7 +119,7 @@ def render_report(
         _overview(analysis),
         _accuracy(c),
         *((_stations(analysis),) if c.by_station else ()),
-        *(_service(analysis, s) for s in analysis.services),
+        *(_service(analysis, group) for group in service_groups(analysis.services)),
         *(confidence_section_html(c) for c in analysis.confidence),
         *(_evt_section(analysis, axis, item) for axis, item in _evt_items(analysis)),
         *(
@@ -229,7 +229,7 @@ def _header(a: Analysis) -> str:
             ("verdicts", "Verdicts"),
             ("overview", "Overview"),
             ("accuracy", "Accuracy"),
-            *((_service_id(s), s.name) for s in a.services),
+            *((_service_id(g[0]), " and ".join(s.name for s in g)) for g in service_groups(a.services)),
             *((f"confidence-{c.axis}", f"{c.axis.capitalize()} PL confidence") for c in a.confidence),
             *((f"evt-{axis}", f"{axis.capitalize()} EVT") for axis, _ in _evt_items(a)),
             *(
@@ -585,15 +585,45 @@ def _stanford_table(a: Analysis, s: ServiceLevel, k: ServiceKPI) -> str:
     return _table(head, rows, cls="stanford", caption=f"Epochs per Stanford region. {swatches}")
 
 
-def _service(a: Analysis, s: ServiceLevel) -> str:
+def _counted_key(s: ServiceLevel) -> tuple:
+    """Everything a service section shows: alert limits and the counted requirements (not the TTA,
+    which only the EVT's HMI filter uses)."""
+    return (
+        s.hal, s.val, s.integrity_risk, s.integrity_exposure_s, s.continuity_risk, s.continuity_window_s,
+        s.availability, s.availability_max, s.accuracy_h95, s.accuracy_v95,
+    )  # fmt: skip
+
+
+def service_groups(services: tuple[ServiceLevel, ...]) -> list[tuple[ServiceLevel, ...]]:
+    """Services that share every number of their section (APV-I and LPV), in first-appearance order."""
+    groups: dict[tuple, list[ServiceLevel]] = {}
+    for s in services:
+        groups.setdefault(_counted_key(s), []).append(s)
+    return [tuple(g) for g in groups.values()]
+
+
+def _service(a: Analysis, group: tuple[ServiceLevel, ...]) -> str:
+    s = group[0]
     k = a.counting.services[s.name]
     limits = f"HAL {s.hal:g} m, " + (f"VAL {s.val:g} m" if s.val is not None else "no vertical alert limit")
+    shared = (
+        "<br><small>"
+        + _e(" and ".join(x.name for x in group))
+        + " share these alert limits and requirements, so every number below is theirs alike (TTA "
+        + _e(", ".join(f"{x.name} {x.tta_s:g} s" for x in group))
+        + ")."
+        + "".join(f'<span id="{_e(_service_id(x))}"></span>' for x in group[1:])
+        + "</small>"
+        if len(group) > 1
+        else ""
+    )
     intro = (
         f'<p class="limits">{_e(limits)} · integrity risk {scientific(s.integrity_risk)} per '
         f"{s.integrity_exposure_s:g} s · continuity risk {scientific(s.continuity_risk)} per "
         f"{s.continuity_window_s:g} s · availability "
         f"{_h_share(s.availability)}–{_h_share(s.availability_max)}"
-        f"<br><small>Requirements: {_e(s.source or 'user-defined')}</small></p>"
+        f"<br><small>Requirements: {_e('; '.join(dict.fromkeys(x.source or 'user-defined' for x in group)))}"
+        f"</small>{shared}</p>"
     )
     kpis = _table(
         ["KPI", "Axis", _num("Value"), "Counts / note", _num("Requirement"), "Estimate vs requirement"],
@@ -619,7 +649,7 @@ def _service(a: Analysis, s: ServiceLevel) -> str:
     figs = '<div class="figrow">' + "".join(figures) + "</div>"
     return _section(
         _service_id(s),
-        s.name,
+        " and ".join(x.name for x in group),
         f"{intro}\n<h3>KPIs against requirements</h3>\n{kpis}\n"
         f"<h3>Stanford regions</h3>\n{_stanford_table(a, s, k)}\n{figs}",
     )
