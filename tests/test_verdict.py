@@ -170,3 +170,25 @@ def test_summary_verdicts_and_provenance(gaussian_campaign, tmp_path):
         "x": "input.csv"
     }
     assert str(tmp_path) not in json.dumps(doc, default=str)
+
+
+def _consistent(v) -> bool:
+    """A verdict never contradicts the evidence listed under it."""
+    votes = {e.vote for e in v.evidence}
+    if v.verdict == PASS:
+        return "fail" not in votes
+    if v.verdict == FAIL:
+        return "fail" in votes or v.kind == "overall"
+    return True
+
+
+@pytest.mark.parametrize("anomaly", ["band:15:16:3", "bias:30:1800:12:vertical"])
+def test_anomalies_fail_pl_bounding_and_verdicts_match_their_evidence(anomaly):
+    sim = simulate(SimulationConfig(days=3, seed=5, tail_fraction=0.0, anomalies=(anomaly,)))
+    a = analyze(sim.table, services=["APV-I", "LPV-200"], confidence=("vertical",), evt=None,
+                parametric=True, evt_n_boot=100)
+    result = assess(a)
+    for sv in result.services.values():
+        assert sv.pl_bounding.verdict != PASS  # the true risk fails on both anomalies
+        for k in (*KINDS, "overall"):
+            assert _consistent(sv.get(k)), (sv.service, k, sv.get(k).sentence)

@@ -39,6 +39,7 @@ import argparse
 import json
 import math
 import multiprocessing
+import os
 import time
 import warnings
 
@@ -298,6 +299,8 @@ def main() -> None:
             records.append(r)
             if i % 10 == 0:
                 print(f"{i}/{len(jobs)} done, {time.perf_counter() - t0:.0f} s", flush=True)
+                with open(args.out + ".partial", "w", encoding="utf-8") as f:
+                    json.dump(records, f)
     summary = summarise(records, truths)
     doc = {
         "command": "python validation/verdict_coverage.py "
@@ -313,7 +316,7 @@ def main() -> None:
         "records": records,
         "seconds": round(time.perf_counter() - t0, 1),
     }
-    with open(args.out, "w", encoding="utf-8") as f:
+    with open(args.out + ".tmp", "w", encoding="utf-8") as f:
         json.dump(
             doc,
             f,
@@ -321,6 +324,9 @@ def main() -> None:
             sort_keys=True,
             default=lambda x: None if isinstance(x, float) and math.isnan(x) else x,
         )
+    os.replace(args.out + ".tmp", args.out)  # a run killed halfway leaves no half-written result
+    if os.path.exists(args.out + ".partial"):
+        os.remove(args.out + ".partial")
     for name, per in summary.items():
         for s, row in per.items():
             cells = []

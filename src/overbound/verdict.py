@@ -62,7 +62,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
@@ -360,13 +360,6 @@ def _adequacy_note(a: Adequacy) -> str:
 # models of the tail, per exposure
 
 
-@dataclass(frozen=True, slots=True)
-class _Model:
-    """A tail model's per-exposure figure on one axis, its adequacy and what it rests on."""
-
-    item: EvidenceItem
-
-
 def _evt_item(
     tail: TailFit, axis: str, exposure_n: float, counts: TailCounts, quantity: str, n_total: int
 ) -> EvidenceItem | None:
@@ -584,6 +577,9 @@ def _tail_models(ctx: _Context, s: ServiceLevel, axis: str, hmi: bool) -> list[E
         which = "SI on epochs with PL < AL" if own else "SI on all epochs, an upper bound"
         if tail is not None:
             it = _evt_item(tail, axis, n_exp, counts, f"P(MI, PL < AL) per exposure ({which})", tail.n_total)
+            if it is not None and hmi:
+                # HMI implies MI: the MI tail bounds P(HMI) from above only, so it never votes fail here
+                it = replace(it, lower=None, note="an upper bound of P(HMI): HMI implies MI")
             if it is not None:
                 items.append(it)
     par = ctx.parametric.axis(axis) if ctx.parametric is not None else None
@@ -606,8 +602,6 @@ def _tail_models(ctx: _Context, s: ServiceLevel, axis: str, hmi: bool) -> list[E
 
 def _model_vote(it: EvidenceItem, share: float) -> EvidenceItem:
     """The item with its vote: ``none`` when rejected (R4) or without an upper bound."""
-    from dataclasses import replace
-
     if it.adequacy is not None and it.adequacy.rejected:
         return replace(it, vote="none", note="rejected by the data: " + _adequacy_note(it.adequacy))
     if it.upper is None:
@@ -693,13 +687,11 @@ def _tail_verdict(kind: str, ctx: _Context, s: ServiceLevel) -> Verdict:
         if total is not None and not models_pass:
             why.append(f"the admissible upper bounds add up to {format_probability(total)} > {req_p:g}")
         pre = f"{events} {what} epochs observed" if events else f"No {what} observed"
-        sentence = f"{pre}, but the {req} is not demonstrated: " + "; ".join(why or ["no evidence"]) + "."
+        sentence = f"{pre}, but {req} is not demonstrated: " + "; ".join(why or ["no evidence"]) + "."
     return Verdict(kind, v, req, basis, sentence, tuple(items))
 
 
 def _with_vote(it: EvidenceItem, vote: str) -> EvidenceItem:
-    from dataclasses import replace
-
     return replace(it, vote=vote)
 
 

@@ -116,7 +116,11 @@ def _why(services: Mapping[str, ServiceVerdicts]) -> str:
 
 
 def _number(item: EvidenceItem, x: float | None, log10_x: float | None = None) -> str:
-    """A figure in the unit of ``item.quantity``: metres, a share, or a probability."""
+    """A figure in the unit of ``item.quantity`` (metres, a share, or a probability), as HTML."""
+    return escape(_plain_number(item, x, log10_x))
+
+
+def _plain_number(item: EvidenceItem, x: float | None, log10_x: float | None = None) -> str:
     if x is None:
         return "—"
     if "(m)" in item.quantity:
@@ -131,7 +135,7 @@ def _number(item: EvidenceItem, x: float | None, log10_x: float | None = None) -
 def _interval(item: EvidenceItem) -> str:
     lo = "—" if item.lower is None else _number(item, item.lower)
     hi = _number(item, item.upper, item.log10_upper)
-    if item.upper == 0 and "0" == hi:
+    if item.upper == 0 and hi == "0":
         hi = "0 (" + escape(item.note or "no tail value reaches SI = 1") + ")"
     return f"{lo} … {hi}"
 
