@@ -192,3 +192,16 @@ def test_anomalies_fail_pl_bounding_and_verdicts_match_their_evidence(anomaly):
         assert sv.pl_bounding.verdict != PASS  # the true risk fails on both anomalies
         for k in (*KINDS, "overall"):
             assert _consistent(sv.get(k)), (sv.service, k, sv.get(k).sentence)
+
+
+def test_several_stations_get_their_own_verdicts():
+    table = pl.concat([_epochs(station="A"), _epochs(station="B", hmi_at=100)])
+    a = analyze(table, services=["LPV-200"])
+    result = assess(a)
+    assert set(result.by_station) == {"A", "B"}
+    assert result.by_station["B"]["LPV-200"].integrity.verdict == FAIL  # B saw the HMI
+    assert result.by_station["A"]["LPV-200"].integrity.verdict != FAIL
+    assert result.services["LPV-200"].integrity.verdict == FAIL  # the pooled network did too
+    doc = summary_dict(a, assessment=result)
+    assert set(doc["verdicts_by_station"]) == {"A", "B"}
+    assert doc["verdicts_by_station"]["B"]["LPV-200"]["integrity"]["verdict"] == "fail"
