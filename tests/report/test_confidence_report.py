@@ -205,3 +205,11 @@ def test_empty_analysis_renders(table, tmp_path):
     assert confidence_dict(nothing)["worst_target"] is None
     ax = plot_confidence(nothing)
     close_figure(ax.figure)
+
+
+def test_confidence_levels_are_never_printed_below_1e_15():
+    from overbound.report.confidence import _text_cl
+
+    assert _text_cl(1 - 5.6e-16) == "> 1 − 1e-15"  # float rounding at 1 is no information
+    assert _text_cl(3e-20) == "< 1e-15"
+    assert _text_cl(1 - 2e-12) == "1 − 2.0e-12" and _text_cl(2e-9) == "2.00e-09" and _text_cl(1.0) == "1"

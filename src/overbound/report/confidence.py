@@ -32,6 +32,7 @@ from overbound.methods.confidence_level import (
     ConfidenceBin,
     confidence_analysis,
 )
+from overbound.numbers import PRINT_FLOOR
 from overbound.report.figures import new_figure, style
 from overbound.report.page import escape, figure_html, section_html, write_page
 from overbound.stats.overbounding import SigmaInflation
@@ -395,7 +396,11 @@ def _text_cl(x: float) -> str:
         return "n.a."
     if x >= 0.9999:
         q = 1.0 - x
-        return "1" if q <= 0 else f"1 − {q:.1e}"
+        if q < PRINT_FLOOR:  # float rounding at 1, and no probability below 1e-15 is printed
+            return "1" if q <= 0 else "> 1 − 1e-15"
+        return f"1 − {q:.1e}"
+    if 0 < x < PRINT_FLOOR:
+        return "< 1e-15"
     return f"{x:.4g}" if x >= 1e-3 else f"{x:.2e}"
 
 
