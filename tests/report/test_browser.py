@@ -173,6 +173,16 @@ def test_verdicts_first_and_nothing_overflows_at_1024(driver, tmp_path):
         ".map(e => e.tagName + ' ' + (e.closest('section')||{}).id)"
     )
     assert wide == []
+    # the smallest annotation (6.5 pt at FIGURE_DPI) stays at least 8 px on screen in every figure
+    from overbound.report.page import FIGURE_DPI
+
+    scales = driver.execute_script(
+        "return Array.from(document.images).map(i => "
+        "[i.dataset.figure, i.getBoundingClientRect().width / i.naturalWidth])"
+    )
+    px = 6.5 * FIGURE_DPI / 72
+    small = [(name, round(px * k, 1)) for name, k in scales if px * k < 8]
+    assert small == []
     # the sticky navigation stays on screen while scrolling
     driver.execute_script("window.scrollTo(0, document.body.scrollHeight / 2)")
     nav_top = driver.execute_script("return document.querySelector('nav.sticky').getBoundingClientRect().top")

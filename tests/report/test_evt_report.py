@@ -135,7 +135,8 @@ def test_service_verdicts_and_no_estimate(analysis, section):
 
 def test_every_figure_with_alt_and_caption(section):
     figures = re.findall(
-        r'<figure><img src="data:image/png;base64,[^"]+" width="\d+" height="\d+" alt="([^"]+)" '
+        r'<figure(?: class="wide")?><img src="data:image/png;base64,[^"]+" '
+        r'width="\d+" height="\d+" alt="([^"]+)" '
         r'data-figure="evt-vertical-([a-z-]+)"><figcaption>([^<]+)</figcaption>',
         section,
     )

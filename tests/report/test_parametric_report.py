@@ -273,7 +273,8 @@ def test_noncontinuity_figure(analysis):
 def test_section_figures_alt_and_captions(section):
     for axis, names in FIGURES.items():
         found = re.findall(
-            rf'<figure><img src="data:image/png;base64,[^"]+" width="\d+" height="\d+" alt="([^"]+)" '
+            rf'<figure(?: class="wide")?><img src="data:image/png;base64,[^"]+" '
+            rf'width="\d+" height="\d+" alt="([^"]+)" '
             rf'data-figure="parametric-{axis}-([a-z0-9-]+)"><figcaption>([^<]+)</figcaption>',
             section,
         )

@@ -35,6 +35,12 @@ def escape(text: object) -> str:
     return html.escape(str(text), quote=True)
 
 
+#: A figure wider than this (PNG pixels) takes a whole row of a ``figrow``: two-up in a 1024 px window
+#: (474 px a column) it would be shrunk below 0.81, and its smallest, 6.5 pt annotations (9.9 px at
+#: 110 dpi) below 8 px on screen.
+WIDE_FIGURE_PX = 580
+
+
 def figure_html(ax: Axes, *, name: str, alt: str, caption: str) -> str:
     """Render ``ax``'s figure to a PNG, close it, and return a ``<figure>`` with the PNG inline.
 
@@ -48,8 +54,9 @@ def figure_html(ax: Axes, *, name: str, alt: str, caption: str) -> str:
         close_figure(fig)
     width, height = int.from_bytes(png[16:20], "big"), int.from_bytes(png[20:24], "big")
     data = base64.b64encode(png).decode("ascii")
+    wide = ' class="wide"' if width > WIDE_FIGURE_PX else ""
     return (
-        f'<figure><img src="data:image/png;base64,{data}" width="{width}" height="{height}" '
+        f'<figure{wide}><img src="data:image/png;base64,{data}" width="{width}" height="{height}" '
         f'alt="{escape(alt)}" data-figure="{escape(name)}">'
         f"<figcaption>{escape(caption)}</figcaption></figure>"
     )
@@ -105,6 +112,7 @@ figure{margin:8px 0;break-inside:avoid}
 figure img{max-width:100%;height:auto;display:block;border:1px solid var(--line)}
 figcaption{color:var(--muted);font-size:.8rem;margin-top:3px}
 .figrow{display:grid;grid-template-columns:repeat(auto-fit,minmax(360px,1fr));gap:14px;align-items:start}
+.figrow figure.wide{grid-column:1/-1}
 dl.notes dt{font-weight:600;margin-top:.7em}
 dl.notes dd{margin:.15em 0 0;max-width:75em}
 ol.refs{font-size:.88rem;color:var(--muted)}
