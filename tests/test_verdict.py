@@ -185,8 +185,14 @@ def _consistent(v) -> bool:
 @pytest.mark.parametrize("anomaly", ["band:15:16:3", "bias:30:1800:12:vertical"])
 def test_anomalies_fail_pl_bounding_and_verdicts_match_their_evidence(anomaly):
     sim = simulate(SimulationConfig(days=3, seed=5, tail_fraction=0.0, anomalies=(anomaly,)))
-    a = analyze(sim.table, services=["APV-I", "LPV-200"], confidence=("vertical",), evt=None,
-                parametric=True, evt_n_boot=100)
+    a = analyze(
+        sim.table,
+        services=["APV-I", "LPV-200"],
+        confidence=("vertical",),
+        evt=None,
+        parametric=True,
+        evt_n_boot=100,
+    )
     result = assess(a)
     for sv in result.services.values():
         assert sv.pl_bounding.verdict != PASS  # the true risk fails on both anomalies

@@ -261,7 +261,7 @@ def _run_analysis(
             "confidence": confidence,
             "evt": evt,
             "parametric": parametric,
-            **{k: _option_text(v) for k, v in read_opts.items() if v is not None},
+            **{k: v for k, v in read_opts.items() if v is not None},
         }
         command = ["overbound", *sys.argv[1:]]
         doc = summary_dict(
@@ -275,17 +275,6 @@ def _run_analysis(
             write_epochs(result.table, epochs_out)
     _print_summary(result, assessment)
     return summary, report, assessment
-
-
-def _option_text(v):
-    """An option value as JSON-friendly text (a reference as its string, a time as ISO)."""
-    if isinstance(v, list | tuple):
-        return [_option_text(x) for x in v]
-    if isinstance(v, dict):
-        return {str(k): _option_text(x) for k, x in v.items()}
-    if isinstance(v, bool | int | float | str) or v is None:
-        return v
-    return v.isoformat() if hasattr(v, "isoformat") else str(v)
 
 
 def _fmt(x: float | None, pct: bool = False) -> str:

@@ -361,7 +361,7 @@ def _adequacy_note(a: Adequacy) -> str:
 
 
 def _evt_item(
-    tail: TailFit, axis: str, exposure_n: float, counts: TailCounts, quantity: str, n_total: int
+    tail: TailFit, axis: str, exposure_n: float, counts: TailCounts, quantity: str
 ) -> EvidenceItem | None:
     """R5/R6: the EVT per-exposure estimate and bounds, shape floored at 0, with its adequacy."""
     from overbound.methods.tail_extrapolation import per_approach
@@ -576,7 +576,7 @@ def _tail_models(ctx: _Context, s: ServiceLevel, axis: str, hmi: bool) -> list[E
         tail = h.tail if own else e.tail
         which = "SI on epochs with PL < AL" if own else "SI on all epochs, an upper bound"
         if tail is not None:
-            it = _evt_item(tail, axis, n_exp, counts, f"P(MI, PL < AL) per exposure ({which})", tail.n_total)
+            it = _evt_item(tail, axis, n_exp, counts, f"P(MI, PL < AL) per exposure ({which})")
             if it is not None and hmi:
                 # HMI implies MI: the MI tail bounds P(HMI) from above only, so it never votes fail here
                 it = replace(it, lower=None, note="an upper bound of P(HMI): HMI implies MI")
@@ -617,21 +617,19 @@ def _tail_verdict(kind: str, ctx: _Context, s: ServiceLevel) -> Verdict:
     req_p = s.integrity_risk
     req = f"P({'HMI' if hmi else 'MI while PL < AL'}) <= {req_p:g} per {s.integrity_exposure_s:g} s"
     axes = [a for a in _AXES if s.alert_limit(a) is not None]
+    what = "HMI" if hmi else "MI"
     sv = ctx.evidence.services[s.name]
-    counted = [
-        _counted_item((sv.hmi if hmi else sv.mi)[a], a, "HMI" if hmi else "MI", s.integrity_exposure_s)
-        for a in axes
-    ]
-    events = sum((sv.hmi if hmi else sv.mi)[a].epochs for a in axes)
+    observed = sv.hmi if hmi else sv.mi
+    events = sum(observed[a].epochs for a in axes)
     items: list[EvidenceItem] = []
     fails: list[str] = []
-    for it in counted:
-        over = it.lower is not None and it.lower > req_p
-        if hmi and ctx.evidence.services[s.name].hmi[it.axis].epochs > 0:
-            over = True
-        items.append(_with_vote(it, "fail" if over else "none"))
+    for a in axes:
+        it = _counted_item(observed[a], a, what, s.integrity_exposure_s)
+        # R2: any observed HMI fails; R3: observed MI fail when their lower bound misses the risk
+        over = (hmi and observed[a].epochs > 0) or (it.lower is not None and it.lower > req_p)
+        items.append(replace(it, vote="fail" if over else "none"))
         if over:
-            fails.append(f"{it.axis} {'HMI' if hmi else 'MI'} observed ({it.assumption.split(' in ')[0]})")
+            fails.append(f"{a} {what} observed ({observed[a].epochs} {what} epochs)")
     if not hmi:
         for a in axes:
             cl = ctx.confidence.get(a)
@@ -658,7 +656,6 @@ def _tail_verdict(kind: str, ctx: _Context, s: ServiceLevel) -> Verdict:
             missing.append(a)
     total = sum(i.upper for i in uppers.values()) if uppers and not missing else None
     models_pass = total is not None and total <= req_p
-    what = "HMI" if hmi else "MI"
     if fails:
         v, basis = FAIL, "counted" if any("observed" in f for f in fails) else "PL confidence level"
         shown = fails[:3] + ([f"{len(fails) - 3} more"] if len(fails) > 3 else [])
@@ -689,10 +686,6 @@ def _tail_verdict(kind: str, ctx: _Context, s: ServiceLevel) -> Verdict:
         pre = f"{events} {what} epochs observed" if events else f"No {what} observed"
         sentence = f"{pre}, but {req} is not demonstrated: " + "; ".join(why or ["no evidence"]) + "."
     return Verdict(kind, v, req, basis, sentence, tuple(items))
-
-
-def _with_vote(it: EvidenceItem, vote: str) -> EvidenceItem:
-    return replace(it, vote=vote)
 
 
 def _integrity(ctx: _Context, s: ServiceLevel, bounding: Verdict) -> Verdict:

@@ -202,13 +202,19 @@ def loss_events(time_s: np.ndarray, available: np.ndarray, interval_s: float, wi
     return run_clusters(time_s[:-1][loss], window_s)
 
 
-def quantile_bounds(x: np.ndarray, q: float, n_effective: float, confidence: float) -> CountedQuantile:
-    """The ``q`` quantile of ``x`` (numpy's linear interpolation) and its order-statistic bounds:
-    the quantiles at the Clopper-Pearson bounds of the level ``q`` with ``n_effective`` trials."""
+def quantile_bounds(
+    x: np.ndarray, q: float, n_effective: float, confidence: float, estimate: float | None = None
+) -> CountedQuantile:
+    """The ``q`` quantile of ``x`` (numpy's linear interpolation; ``estimate`` when the caller has it)
+    and its order-statistic bounds: the quantiles at the Clopper-Pearson bounds of the level ``q``
+    with ``n_effective`` trials."""
     if x.size == 0:
         return CountedQuantile(q, 0, 0.0, None, None, None)
     b = clopper_pearson(q * n_effective, n_effective, confidence)
-    lo, est, hi = np.quantile(x, [b.lower, q, b.upper])
+    if estimate is None:
+        lo, est, hi = np.quantile(x, [b.lower, q, b.upper])
+    else:
+        (lo, hi), est = np.quantile(x, [b.lower, b.upper]), estimate
     return CountedQuantile(q, int(x.size), n_effective, float(est), float(lo), float(hi))
 
 
@@ -243,12 +249,13 @@ def _arrays(table: pl.DataFrame, rows) -> _Arrays:
     t_us = as_numpy(table["time"])[rows]
     pe = {"horizontal": as_numpy(table["hpe"])[rows], "vertical": np.abs(as_numpy(table["vpe"])[rows])}
     pls = {"horizontal": as_numpy(table["hpl"])[rows], "vertical": as_numpy(table["vpl"])[rows]}
-    solution = np.isfinite(pe["horizontal"]) & np.isfinite(pls["horizontal"])
-    solution &= np.isfinite(pe["vertical"]) & np.isfinite(pls["vertical"])
     alert = None
     if "alert" in table.columns and table["alert"].any():
         alert = as_numpy(table["alert"].fill_null(False))[rows]
         pls = {a: np.where(alert & ~np.isnan(x), np.inf, x) for a, x in pls.items()}
+    # as in count_kpis: an alerted epoch (PL infinite) has no solution
+    solution = np.isfinite(pe["horizontal"]) & np.isfinite(pls["horizontal"])
+    solution &= np.isfinite(pe["vertical"]) & np.isfinite(pls["vertical"])
     step = nominal_interval_us(t_us)
     return _Arrays(t_us, pe, pls, alert, solution, None if step is None else step / 1e6)
 
@@ -336,10 +343,10 @@ def _station(
     acc = {}
     for a in _AXES:
         x = d.pe[a][d.solution]
-        q = float(np.percentile(x, 95)) if x.size else math.nan
+        q = counting.hpe95 if a == "horizontal" else counting.vpe95  # numpy's percentile of the same x
         n_eff = effective_size(x > q, interval, fallback_s)[0] if x.size else 0.0
         partial[("accuracy", a)] = (x, n_eff)
-        acc[a] = quantile_bounds(x, 0.95, n_eff, confidence)
+        acc[a] = quantile_bounds(x, 0.95, n_eff, confidence, q)
     tails = {a: _tail_counts(d, a, gap_s) for a in _AXES}
     ev = StationEvidence(name, int(d.t_us.size), d.interval_s, acc, tails, out)
     return ev, partial
@@ -445,7 +452,8 @@ def _pool(stations: dict, partials: dict, counting: CountingResult, services, ga
     for a in _AXES:
         xs = [partials[n][("accuracy", a)] for n in names]
         x = np.concatenate([v[0] for v in xs])
-        acc[a] = quantile_bounds(x, 0.95, sum(v[1] for v in xs), c)
+        q = counting.hpe95 if a == "horizontal" else counting.vpe95
+        acc[a] = quantile_bounds(x, 0.95, sum(v[1] for v in xs), c, q)
     tails = {a: _merge_tails([stations[n].tails[a] for n in names], a, gap_s) for a in _AXES}
     intervals = {st.interval_s for st in stations.values()}
     interval = intervals.pop() if len(intervals) == 1 else None

@@ -495,6 +495,8 @@ def _kpi_rows(a: Analysis, s: ServiceLevel, k: ServiceKPI) -> list[list[str]]:
             return
         pending.remove(v)
         note = v.note if v.passed is not None or v.note else "not computable"
+        # the MI / HMI counts carry no pass of their own: their verdicts open the report
+        count_only = v.passed is None and v.kpi.endswith("(counted)")
         shown = value if value is not None and v.value is not None else _value(v)
         rows.append(
             [
@@ -502,10 +504,8 @@ def _kpi_rows(a: Analysis, s: ServiceLevel, k: ServiceKPI) -> list[list[str]]:
                 _e(axis),
                 _num(shown),
                 counts or _e(note),
-                _num(_requirement(v) if v.required is not None or not v.kpi.endswith("(counted)") else "—"),
-                _h_badge(v.passed, v.kpi, note)
-                if v.passed is not None or not v.kpi.endswith("(counted)")
-                else '<a href="#verdicts">see the verdicts</a>',
+                _num("—" if count_only and v.required is None else _requirement(v)),
+                '<a href="#verdicts">see the verdicts</a>' if count_only else _h_badge(v.passed, v.kpi, note),
             ]
         )
 

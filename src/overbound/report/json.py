@@ -104,7 +104,8 @@ def provenance_dict(
     inputs: list[str | Path] | tuple = (), command: list[str] | None = None, options: dict | None = None
 ) -> dict:
     """The ``provenance`` object: overbound version, the command line (paths reduced to their base
-    names), the options, and each input file's base name, size and SHA-256."""
+    names), the options (as JSON values, paths as base names, times in ISO 8601, other objects as
+    their text) and each input file's base name, size and SHA-256."""
     files = [file_digest(p) for p in inputs if isinstance(p, str | Path) and Path(p).is_file()]
     return {
         "overbound_version": __version__,
@@ -115,7 +116,8 @@ def provenance_dict(
 
 
 def _base(arg: str) -> str:
-    """A command-line word with any path reduced to its base name (``-o/x/out`` -> ``-oout``)."""
+    """A command-line word with any path reduced to its base name (``/x/in.pos`` -> ``in.pos``,
+    ``--out=/x/dir`` -> ``--out=dir``)."""
     if "=" in arg and arg.startswith("--"):
         key, value = arg.split("=", 1)
         return f"{key}={_base(value)}"
@@ -125,13 +127,18 @@ def _base(arg: str) -> str:
 
 
 def _base_value(v):
+    """An option value as JSON: paths as base names, times in ISO 8601, other objects as their text."""
     if isinstance(v, Path):
         return v.name
-    if isinstance(v, list | tuple):
-        return [_base_value(x) for x in v]
     if isinstance(v, str):
         return _base(v)
-    return v
+    if isinstance(v, list | tuple):
+        return [_base_value(x) for x in v]
+    if isinstance(v, dict):
+        return {str(k): _base_value(x) for k, x in v.items()}
+    if isinstance(v, bool | int | float) or v is None:
+        return v
+    return v.isoformat() if hasattr(v, "isoformat") else str(v)
 
 
 def summary_dict(

@@ -14,6 +14,7 @@ from overbound.numbers import PRINT_FLOOR
 from overbound.report.figures import close_figure, figure_png
 
 __all__ = [
+    "BELOW_FLOOR_HTML",
     "FIGURE_DPI",
     "PAGE_CSS",
     "badge",
@@ -131,6 +132,10 @@ th{white-space:normal}
 """
 
 
+#: What a probability below :data:`overbound.numbers.PRINT_FLOOR` reads as in HTML.
+BELOW_FLOOR_HTML = "&lt;&nbsp;10<sup>−15</sup>"
+
+
 def scientific(x: float | None) -> str:
     """A probability as HTML: plain down to 0.001, else ``m·10<sup>e</sup>``; 0 is 0, None/NaN ``n.a.``."""
     if x is None or not math.isfinite(x):
@@ -140,7 +145,7 @@ def scientific(x: float | None) -> str:
     if 1e-3 <= abs(x) < 1e4:
         return f"{x:.4g}"
     if 0 < x < PRINT_FLOOR:  # no probability below 1e-15 is printed as a number
-        return "&lt;&nbsp;10<sup>−15</sup>"
+        return BELOW_FLOOR_HTML
     exp = math.floor(math.log10(abs(x)))
     mant = x / 10.0**exp
     if round(mant, 2) >= 10:

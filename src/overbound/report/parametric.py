@@ -46,6 +46,7 @@ from overbound.methods.parametric import (
 from overbound.methods.pooling import PE_PL
 from overbound.report.figures import plot_timeseries, style
 from overbound.report.page import (
+    BELOW_FLOOR_HTML,
     badge,
     escape,
     figure_html,
@@ -274,7 +275,7 @@ def _h_p(p: float | None, lg: float | None = None) -> str:
         return "0" if p == 0 else "n.a."
     m, e = me
     if e < -15:  # not printed as a number (overbound.numbers.PRINT_FLOOR)
-        return "&lt;&nbsp;10<sup>−15</sup>"
+        return BELOW_FLOOR_HTML
     return f"{m:.3g}·10<sup>{'−' if e < 0 else ''}{abs(e)}</sup>"
 
 
