@@ -107,7 +107,7 @@ def _why(services: Mapping[str, ServiceVerdicts]) -> str:
             v = sv.get(k)
             if v.verdict != "pass":
                 items.append(
-                    f'<li><a href="#{anchor(name, k)}"><b>{escape(name)} {KIND_TITLES[k].lower()}: '
+                    f'<li><a href="#{anchor(name, k)}"><b>{escape(name)} {KIND_TITLES[k]}: '
                     f"{escape(v.verdict)}.</b></a> {escape(v.sentence)}</li>"
                 )
     if not items:
