@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import sys
 import tempfile
@@ -41,6 +42,20 @@ def _progress() -> Iterator[Progress]:
         disable=not console.is_terminal,
     ) as bar:
         yield bar
+
+
+def _draws_figures(command):
+    """Run ``command`` with its report figures drawn by worker processes
+    (:func:`overbound.report.rendering.parallel_figures`; ``OVERBOUND_FIGURE_PROCESSES`` sets how many)."""
+
+    @functools.wraps(command)
+    def wrapper(*args, **kwargs):
+        from overbound.report.rendering import parallel_figures
+
+        with parallel_figures():
+            return command(*args, **kwargs)
+
+    return wrapper
 
 
 def _reference(lla: str | None, ecef: str | None) -> Reference | None:
@@ -184,6 +199,7 @@ def _read_options(reference, reference_ecef, fmt, station, strict, start, end, c
     help="Add the parametric availability, integrity and continuity (Kannemans 2006) of both axes: "
     "OUTPUT/parametric.json.",
 )
+@_draws_figures
 def analyze(inputs, out_dir, services, epochs_out, confidence, evt, parametric, **inputs_opts) -> None:
     """Analyse receiver output INPUTS: write OUTPUT/summary.json and OUTPUT/report.html."""
     paths = _run_analysis(
@@ -536,6 +552,7 @@ def convert(source, out, **inputs_opts) -> None:
     help="Integrity risk per independent sample.",
 )
 @_with_input_options
+@_draws_figures
 def confidence(
     inputs, out_dir, axis, min_samples, spacing, tolerance, max_tolerance, step, max_pl, risk, **inputs_opts
 ) -> None:
@@ -654,6 +671,7 @@ def _auto_or_float(*, below: float | None = None, minimum: float | None = None):
 )
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the bootstrap.")
 @_with_input_options
+@_draws_figures
 def evt(
     inputs, out_dir, axis, service, threshold, cluster_gap, decluster, n_boot, confidence, seed, **inputs_opts
 ) -> None:
@@ -709,6 +727,7 @@ def _decorrelation_option(ctx, param, value: str) -> str | float:
     help="One-sided confidence level of the bounds.",
 )
 @_with_input_options
+@_draws_figures
 def parametric(inputs, out_dir, services, decorrelation, confidence, **inputs_opts) -> None:
     """Parametric integrity, availability and continuity (Kannemans 2006): OUTPUT/parametric.json, .html."""
     from overbound.analysis import load_epochs
@@ -747,6 +766,7 @@ def parametric(inputs, out_dir, services, decorrelation, confidence, **inputs_op
     help="Length of the simulated campaign.",
 )
 @click.option("--seed", default=2, show_default=True, type=int)
+@_draws_figures
 def demo(out_dir, days, seed) -> None:
     """Analyse the embedded real WAAS day (USLO, 2006-12-27) and a simulated campaign."""
     from overbound.io.geodesy import Reference

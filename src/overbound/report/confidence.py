@@ -35,6 +35,7 @@ from overbound.methods.confidence_level import (
 from overbound.numbers import PRINT_FLOOR
 from overbound.report.figures import new_figure, style
 from overbound.report.page import escape, figure_html, section_html, write_page
+from overbound.report.style import confidence_label, log_scale
 from overbound.stats.overbounding import SigmaInflation
 
 __all__ = [
@@ -126,13 +127,6 @@ def write_confidence(analysis: ConfidenceAnalysis, path: str | Path) -> Path:
 # figures
 
 
-def _cl_format(value: float, _pos: object = None) -> str:
-    if value >= 0.5:
-        q = 1.0 - value
-        return "1" if q <= 0 else (f"{value:g}" if q >= 1e-3 else f"1−10$^{{{round(math.log10(q))}}}$")
-    return f"{value:g}" if value >= 1e-3 else f"10$^{{{round(math.log10(value))}}}$"
-
-
 def plot_confidence(analysis: ConfidenceAnalysis, ax: Axes | None = None) -> Axes:
     """Confidence level against target PL, with the 1 % and 99 % lines (Comby et al. 2003, figure 6).
 
@@ -207,7 +201,7 @@ def plot_confidence(analysis: ConfidenceAnalysis, ax: Axes | None = None) -> Axe
         ax.set_yscale("logit")
         ax.set_ylim(_CL_FLOOR / 2.5, 1.0 - _CL_FLOOR / 2.5)
         ax.yaxis.set_major_locator(FixedLocator([1e-6, 1e-4, 1e-2, 0.5, 0.99, 1 - 1e-4, 1 - 1e-6]))
-        ax.yaxis.set_major_formatter(FuncFormatter(_cl_format))
+        ax.yaxis.set_major_formatter(FuncFormatter(confidence_label))
         ax.yaxis.set_minor_locator(NullLocator())
         if x.size:
             ax.set_xlim(x.min() - analysis.step, x.max() + analysis.step)
@@ -295,7 +289,7 @@ def plot_band_histogram(
         positive = density[density > 0]
         top = 2.0 * float(max(positive.max(initial=0.0), 1.0 / (s * math.sqrt(2 * math.pi))))
         bottom = float(positive.min(initial=top / 1e3)) / 3.0
-        ax.set_yscale("log")
+        log_scale(ax)
         ax.set_ylim(bottom, top)
         ax.set_xlim(lo, hi)
         ax.set_xlabel("signed error (m)")

@@ -33,6 +33,7 @@ from matplotlib.axes import Axes
 from matplotlib.transforms import blended_transform_factory
 
 from overbound.report.figures import envelope, new_figure, style
+from overbound.report.style import log_scale
 from overbound.stats.dependence import Clusters, VKCurve
 from overbound.stats.evt import GPDFit
 from overbound.stats.threshold import ShapeStability
@@ -475,7 +476,7 @@ def plot_p_mi_vs_threshold(
     ymin, ymax = _log_limits(np.concatenate([p, lo, hi]))
     with style():
         ax = _new_axes(ax)
-        ax.set_yscale("log")
+        log_scale(ax)
         ax.set_ylim(ymin, ymax)
         if _positive(np.concatenate([p, hi])).size == 0:
             _note(ax, "no positive P_MI")
@@ -583,7 +584,7 @@ def plot_tail_fit(
     ymin, ymax = _log_limits(shown)
     with style():
         ax = _new_axes(ax, 5.4, 3.6)
-        ax.set_yscale("log")
+        log_scale(ax)
         ax.set_ylim(ymin, ymax)
         if n == 0 or not usable:
             _note(ax, "no exceedances: no tail fit" if n == 0 else "no usable GPD fit")

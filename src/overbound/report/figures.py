@@ -18,21 +18,17 @@ References
 
 from __future__ import annotations
 
-import io
-from collections.abc import Iterator
-from contextlib import contextmanager
-
 import matplotlib
 import numpy as np
 import polars as pl
 from matplotlib.axes import Axes
 from matplotlib.colors import LogNorm
 from matplotlib.dates import AutoDateLocator, ConciseDateFormatter
-from matplotlib.figure import Figure
 from matplotlib.patches import Polygon
 from matplotlib.ticker import FuncFormatter, NullLocator
 
 from overbound.methods.counting import Region, StanfordCounts, StanfordHistogram
+from overbound.report.style import STYLE, close_figure, count_label, figure_png, new_figure, style
 
 __all__ = [
     "AXIS_LABELS",
@@ -49,32 +45,6 @@ __all__ = [
     "plot_timeseries",
     "style",
 ]
-
-#: rc settings of every overbound figure (applied through :func:`style`, never globally).
-#: DejaVu Sans ships with matplotlib, so the same figure renders to the same bytes anywhere.
-STYLE: dict[str, object] = {
-    "font.family": "DejaVu Sans",
-    "font.size": 8.5,
-    "axes.titlesize": 10,
-    "axes.titleweight": "bold",
-    "axes.labelsize": 9,
-    "axes.linewidth": 0.8,
-    "axes.edgecolor": "#333333",
-    "axes.grid": True,
-    "axes.axisbelow": True,
-    "grid.color": "#d9d9d9",
-    "grid.linewidth": 0.5,
-    "xtick.labelsize": 8,
-    "ytick.labelsize": 8,
-    "legend.fontsize": 7.5,
-    "legend.framealpha": 0.9,
-    "lines.linewidth": 0.8,
-    "path.simplify": True,
-    "agg.path.chunksize": 20_000,
-    "savefig.facecolor": "white",
-    "svg.hashsalt": "overbound",
-    "svg.fonttype": "path",
-}
 
 #: Axis labels ``(PE, PL)`` per axis.
 AXIS_LABELS = {"horizontal": ("HPE (m)", "HPL (m)"), "vertical": ("|VPE| (m)", "VPL (m)")}
@@ -99,42 +69,6 @@ _PL_COLOUR = "#d9711c"
 _AL_COLOUR = "#c0201a"
 _ENVELOPE_BINS = 2000
 _SI_BINS = 200
-
-
-def _count_format() -> FuncFormatter:
-    """Epoch counts on log axes as plain integers (1, 10, 1,000) rather than mathtext powers of ten."""
-    return FuncFormatter(lambda value, _pos: f"{value:,.0f}" if value >= 1 else f"{value:g}")
-
-
-@contextmanager
-def style() -> Iterator[None]:
-    """The overbound figure style, as a context (wraps :func:`matplotlib.rc_context`)."""
-    with matplotlib.rc_context(STYLE):
-        yield
-
-
-def new_figure(width: float, height: float) -> Figure:
-    """A :class:`~matplotlib.figure.Figure` outside pyplot (no global state, no display)."""
-    with style():
-        return Figure(figsize=(width, height), dpi=100)
-
-
-def close_figure(fig: Figure) -> None:
-    """Release a figure: ``plt.close`` when pyplot manages it, else clear it."""
-    if getattr(fig.canvas, "manager", None) is not None:
-        import matplotlib.pyplot as plt
-
-        plt.close(fig)
-    else:
-        fig.clear()
-
-
-def figure_png(fig: Figure, *, dpi: float = 120) -> bytes:
-    """The figure as PNG bytes, with no ``Software`` or date metadata, so reruns give the same bytes."""
-    buf = io.BytesIO()
-    with style():
-        fig.savefig(buf, format="png", dpi=dpi, metadata={"Software": None})
-    return buf.getvalue()
 
 
 def format_percent(n: int, total: int) -> str:
@@ -319,7 +253,7 @@ def plot_stanford(
         bar = fig.colorbar(image, cax=cax) if cax is not None else fig.colorbar(image, ax=ax)
         bar.set_label(f"{unit} per bin")
         bar.ax.minorticks_off()
-        bar.ax.yaxis.set_major_formatter(_count_format())
+        bar.ax.yaxis.set_major_formatter(FuncFormatter(count_label))
         bar.ax.tick_params(labelsize=7)
     return ax
 
@@ -520,7 +454,7 @@ def plot_safety_index(table: pl.DataFrame, *, axis: str, ax: Axes | None = None)
         ax.set_ylim(0.7, 2.0 * max(int(counts.max(initial=0)), 5))
         ax.set_yscale("log")
         ax.yaxis.set_minor_locator(NullLocator())
-        ax.yaxis.set_major_formatter(_count_format())
+        ax.yaxis.set_major_formatter(FuncFormatter(count_label))
         ax.set_xlim(0, top)
         if si.size == 0:
             ax.text(0.5, 0.5, "no epoch with a solution", transform=ax.transAxes, ha="center", va="center")

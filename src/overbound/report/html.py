@@ -47,6 +47,7 @@ from overbound.report.json import base_names, dumps, summary_dict
 from overbound.report.page import PAGE_CSS, escape, figure_html, scientific, section_html
 from overbound.report.parametric import parametric_section_html
 from overbound.report.parametric import section_ids as parametric_ids
+from overbound.report.rendering import resolve_figures
 from overbound.report.verdicts import VERDICT_CSS, verdict_section
 from overbound.services import ServiceLevel
 from overbound.verdict import Assessment, assess
@@ -144,7 +145,7 @@ def render_report(
         f'<meta name="generator" content="overbound {_e(__version__)}">\n'
         f"<title>{_e(analysis.title)} — overbound integrity report</title>\n"
         f"<style>{PAGE_CSS}{VERDICT_CSS}</style>\n</head>\n<body>\n<main>\n"
-        + "\n".join(body)
+        + resolve_figures("\n".join(body))
         + "\n</main>\n</body>\n</html>\n"
     )
 

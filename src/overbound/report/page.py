@@ -6,12 +6,14 @@ import base64
 import html
 import math
 from collections.abc import Sequence
+from functools import partial
 from pathlib import Path
 
 from matplotlib.axes import Axes
 
 from overbound.numbers import PRINT_FLOOR
-from overbound.report.figures import close_figure, figure_png
+from overbound.report.rendering import active_renderer, resolve_figures
+from overbound.report.style import close_figure, figure_png
 
 __all__ = [
     "BELOW_FLOOR_HTML",
@@ -19,6 +21,7 @@ __all__ = [
     "PAGE_CSS",
     "badge",
     "escape",
+    "figure_element",
     "figure_html",
     "percent",
     "row_table",
@@ -46,13 +49,25 @@ def figure_html(ax: Axes, *, name: str, alt: str, caption: str) -> str:
     """Render ``ax``'s figure to a PNG, close it, and return a ``<figure>`` with the PNG inline.
 
     The ``<img>`` carries its pixel size, ``alt`` text and a ``data-figure`` name (for tests and
-    readers); the page loads nothing.
+    readers); the page loads nothing. Inside :func:`~overbound.report.rendering.parallel_figures` the
+    figure is drawn by a worker process and a placeholder is returned, which
+    :func:`~overbound.report.rendering.resolve_figures` (called by :func:`write_page`) replaces.
     """
     fig = ax.figure
+    renderer = active_renderer()
     try:
+        if renderer is not None:
+            return renderer.submit(
+                fig, dpi=FIGURE_DPI, wrap=partial(figure_element, name=name, alt=alt, caption=caption)
+            )
         png = figure_png(fig, dpi=FIGURE_DPI)
     finally:
         close_figure(fig)
+    return figure_element(png, name=name, alt=alt, caption=caption)
+
+
+def figure_element(png: bytes, *, name: str, alt: str, caption: str) -> str:
+    """The ``<figure>`` of one PNG (inline, as base64), its pixel size read from the PNG header."""
     width, height = int.from_bytes(png[16:20], "big"), int.from_bytes(png[20:24], "big")
     data = base64.b64encode(png).decode("ascii")
     wide = ' class="wide"' if width > WIDE_FIGURE_PX else ""
@@ -190,7 +205,7 @@ def write_page(path: str | Path, *, title: str, intro_html: str, body_html: str)
         '<meta name="viewport" content="width=device-width, initial-scale=1">\n'
         f'<meta name="generator" content="overbound {escape(__version__)}">\n'
         f"<title>{escape(title)} — overbound</title>\n<style>{PAGE_CSS}</style>\n</head>\n<body>\n<main>\n"
-        f"<h1>{escape(title)}</h1>\n<p>{intro_html}</p>\n{body_html}\n</main>\n</body>\n</html>\n"
+        f"<h1>{escape(title)}</h1>\n<p>{intro_html}</p>\n{resolve_figures(body_html)}\n</main>\n</body>\n</html>\n"
     )
     path = Path(path)
     path.write_bytes(text.encode("utf-8"))

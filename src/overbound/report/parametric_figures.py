@@ -31,12 +31,13 @@ from dataclasses import dataclass
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.dates import AutoDateLocator, ConciseDateFormatter
-from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator
+from matplotlib.ticker import FixedFormatter, FixedLocator, NullLocator
 from matplotlib.transforms import blended_transform_factory
 from scipy import special
 
 from overbound.numbers import TINY, format_probability, mantissa_exponent
 from overbound.report.figures import envelope, new_figure, style
+from overbound.report.style import log_scale
 from overbound.stats.continuity import ContinuityCurve, LogLinearFit
 from overbound.stats.parametric import (
     RatioFit,
@@ -188,7 +189,7 @@ def _probability_axis(ax: Axes, transform, *, x: bool = False) -> None:
             ticks.append((q, p))
     target = ax.xaxis if x else ax.yaxis
     target.set_major_locator(FixedLocator([q for q, _ in ticks]))
-    target.set_major_formatter(FuncFormatter(lambda _v, i: f"{ticks[i][1]:g}" if i < len(ticks) else ""))
+    target.set_major_formatter(FixedFormatter([f"{p:g}" for _, p in ticks]))
     target.set_minor_locator(NullLocator())
 
 
@@ -289,7 +290,7 @@ def plot_weibull_probability(
     name = _PL.get(axis, "PL")
     with style():
         ax = _new_axes(ax, left=0.18)
-        ax.set_xscale("log")
+        log_scale(ax, "x")
         ax.plot(
             np.exp(lx), y, ".", ms=2.0, color=_DATA_COLOUR, gid="pl-data", label=f"{name} ({fit.n:,} epochs)"
         )
@@ -682,7 +683,7 @@ def plot_noncontinuity(
         if ax is None:
             fig = new_figure(8.0, 3.8)
             ax = fig.add_axes((0.09, 0.14, 0.56, 0.76))
-        ax.set_yscale("log")
+        log_scale(ax)
         ax.set_ylim(lo, max(hi, lo * 100.0))
         if not np.any(pos):
             _note(ax, "no loss of continuity at any alert limit")
