@@ -2,7 +2,8 @@ r"""Share of simulated campaigns whose parametric bounds (Kannemans 2006) lie at
 
 Usage::
 
-    python validation/parametric_coverage.py [--reps 200] [--hours 6.5] [--first-seed 0] [--out FILE.json]
+    python validation/parametric_coverage.py [--reps 200] [--hours 6.5] [--first-seed 0]
+        [--tau-pl 600] [--tau-ratio 300] [--out FILE.json]
 
 Each repetition builds one 1 Hz station whose law is exactly the paper's model, so the truth is known:
 
@@ -58,14 +59,16 @@ def _weibull_pl(w: np.ndarray, scale: float, b: float) -> np.ndarray:
     return scale * (-special.log_ndtr(-w)) ** (1.0 / b)  # -ln(1 - Phi(w)) = -ln Phi(-w)
 
 
-def campaign(seed: int, hours: float) -> pl.DataFrame:
+def campaign(
+    seed: int, hours: float, tau_pl_s: float = TAU_PL_S, tau_ratio_s: float = TAU_RATIO_S
+) -> pl.DataFrame:
     """One station of ``hours`` at 1 Hz from the model above."""
     rng = np.random.default_rng(seed)
     n = round(hours * 3600)
-    rv = MEAN_V + SIGMA_V * _ar1(rng, n, TAU_RATIO_S)
-    rh = SIGMA_H * np.hypot(_ar1(rng, n, TAU_RATIO_S), _ar1(rng, n, TAU_RATIO_S))
-    vpl = _weibull_pl(_ar1(rng, n, TAU_PL_S), *VPL_LAW)
-    hpl = _weibull_pl(_ar1(rng, n, TAU_PL_S), *HPL_LAW)
+    rv = MEAN_V + SIGMA_V * _ar1(rng, n, tau_ratio_s)
+    rh = SIGMA_H * np.hypot(_ar1(rng, n, tau_ratio_s), _ar1(rng, n, tau_ratio_s))
+    vpl = _weibull_pl(_ar1(rng, n, tau_pl_s), *VPL_LAW)
+    hpl = _weibull_pl(_ar1(rng, n, tau_pl_s), *HPL_LAW)
     t0 = np.datetime64("2026-01-01T00:00:00", "us")
     return pl.DataFrame(
         {
@@ -98,8 +101,10 @@ def truth() -> dict[str, dict[str, float]]:
     return out
 
 
-def one(seed: int, hours: float) -> dict:
-    a = parametric_analysis(campaign(seed, hours), services=tuple(sorted({c[0] for c in CHECKS})))
+def one(seed: int, hours: float, tau_pl_s: float = TAU_PL_S, tau_ratio_s: float = TAU_RATIO_S) -> dict:
+    a = parametric_analysis(
+        campaign(seed, hours, tau_pl_s, tau_ratio_s), services=tuple(sorted({c[0] for c in CHECKS}))
+    )
     row: dict = {"seed": seed}
     for name, axis, _ in CHECKS:
         ax = getattr(a, axis)
@@ -118,18 +123,28 @@ def one(seed: int, hours: float) -> dict:
 
 
 def shares(rows: list[dict], true: dict) -> dict:
-    """Per check and quantity: share of bounds >= truth, and the median of log10(estimate/truth)."""
+    """Per check and quantity: share of bounds >= truth (a missing bound counts as a miss), share of
+    campaigns given no bound (too few effective samples: the method declines), share of false bounds
+    (given and below the truth) and coverage among the bounds given; the median of log10(estimate/truth)."""
     out = {}
     for key, t in true.items():
         for q in ("p_mi", "unavailability", "p_hmi"):
             tv = t[f"log10_{q}"]
-            b = np.array([r[key][f"log10_{q}_bound"] for r in rows], dtype=float)
+            b = np.array(
+                [np.nan if (v := r[key][f"log10_{q}_bound"]) is None else v for r in rows], dtype=float
+            )
             e = np.array([r[key][f"log10_{q}"] for r in rows], dtype=float)
             k = int(np.count_nonzero(b >= tv))
+            given = int(np.count_nonzero(np.isfinite(b)))
+            below = int(np.count_nonzero(b < tv))
             out[f"{key}/{q}"] = {
                 "truth_log10": tv,
                 "bound_at_or_above_truth": k / len(rows),
                 "ci": binomial_ci(k, len(rows)),
+                "no_bound": (len(rows) - given) / len(rows),
+                "bound_below_truth": below / len(rows),
+                "bound_below_truth_ci": binomial_ci(below, len(rows)),
+                "coverage_of_bounds_given": k / given if given else None,
                 "median_log10_estimate_over_truth": float(np.median(e - tv)),
             }
     return out
@@ -140,18 +155,20 @@ def main() -> None:
     ap.add_argument("--reps", type=int, default=200)
     ap.add_argument("--hours", type=float, default=6.5)
     ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument("--tau-pl", type=float, default=TAU_PL_S, help="1/e time of the PL series (s)")
+    ap.add_argument("--tau-ratio", type=float, default=TAU_RATIO_S, help="1/e time of the ratio series (s)")
     ap.add_argument("--out", default=None)
     o = ap.parse_args()
     t0 = time.perf_counter()
-    rows = [one(s, o.hours) for s in range(o.first_seed, o.first_seed + o.reps)]
+    rows = [one(s, o.hours, o.tau_pl, o.tau_ratio) for s in range(o.first_seed, o.first_seed + o.reps)]
     wall = time.perf_counter() - t0
     summary = {
         "config": {
             "reps": o.reps,
             "hours": o.hours,
             "first_seed": o.first_seed,
-            "tau_ratio_s": TAU_RATIO_S,
-            "tau_pl_s": TAU_PL_S,
+            "tau_ratio_s": o.tau_ratio,
+            "tau_pl_s": o.tau_pl,
             "mean_v": MEAN_V,
             "sigma_v": SIGMA_V,
             "sigma_h": SIGMA_H,
@@ -167,6 +184,7 @@ def main() -> None:
         lo, hi = v["ci"]
         print(
             f"  {key:36s} {v['bound_at_or_above_truth']:.3f} [{lo:.3f}, {hi:.3f}]"
+            f"  no bound {v['no_bound']:.3f}, false bound {v['bound_below_truth']:.3f}"
             f"  truth 1e{v['truth_log10']:.2f}"
             f"  median log10(est/truth) {v['median_log10_estimate_over_truth']:+.2f}"
         )

@@ -351,6 +351,25 @@ def test_weibull_bound_is_the_wald_ellipse_maximum():
         weibull_bound(f, cov * 1e4, al, 0.999)
 
 
+def test_weibull_bound_student_quantile_for_few_effective_samples():
+    """With ``dof`` the ellipse's radius is Student's t quantile: wider than the normal one for few
+    degrees of freedom, the normal bound in the limit, and no bound for dof <= 0."""
+    f = _weibull(2.0, 15.0)
+    cov = np.array([[4e-3, -1.2e-3], [-1.2e-3, 5e-4]])
+    al, c = 40.0, 0.95
+    normal = weibull_bound(f, cov, al, c)
+    for dof, radius in ((4.0, stats.t.ppf(c, 4.0)), (1e9, stats.norm.ppf(c))):
+        wb = weibull_bound(f, cov, al, c, dof=dof)
+        d = np.array([math.log(wb.a) - math.log(f.a), wb.b - f.b])
+        assert d @ np.linalg.solve(cov, d) == pytest.approx(radius**2, rel=1e-8)
+    assert float(weibull_sf(weibull_bound(f, cov, al, c, dof=4.0), al)) > float(weibull_sf(normal, al))
+    for bad in (0.0, -1.0, math.nan, math.inf):
+        with pytest.raises(ValueError, match="dof"):
+            weibull_bound(f, cov, al, c, dof=bad)
+    with pytest.raises(ValueError, match="a = 0"):  # a bound whose scale underflows is no bound
+        weibull_bound(f, np.array([[1e6, 0.0], [0.0, 1e-8]]), al, c, dof=1.0)
+
+
 def test_weibull_pdf_band_is_the_delta_method():
     f = _weibull(1.5, 10.0)
     cov = np.array([[2e-3, -6e-4], [-6e-4, 3e-4]])

@@ -533,7 +533,7 @@ def _axis(
     if bound_fit is None:
         notes.append(_short_note("ratio", n_eff, tau_r))
     cov = None
-    if pl_n_eff >= 2:
+    if pl_n_eff > 2:  # the bound's t quantile has n_e - 2 degrees of freedom
         cov = weibull_covariance(weibull, pls, pl_n_eff)
     else:
         notes.append(_short_note("PL", pl_n_eff, tau_p))
@@ -562,6 +562,7 @@ def _axis(
         bound_fit,
         weibull,
         cov,
+        pl_n_eff,
         confidence,
         pl_range,
         curves,
@@ -614,7 +615,7 @@ def _short_note(series: str, n_eff: float, tau: float) -> str:
         )
     return (
         f"no {series} bound: {n_eff:.3g} effective samples (decorrelation time {tau:g} s) "
-        "is too few (at least 2 needed)"
+        "is too few (more than 2 needed)"
     )
 
 
@@ -626,6 +627,7 @@ class _AxisContext:
     bound_fit: RatioFit | None
     weibull: WeibullFit
     cov: np.ndarray | None
+    pl_n_effective: float
     confidence: float
     pl_range: tuple[float, float]
     curves: dict[float, ContinuityCurve]
@@ -644,7 +646,7 @@ def _service(ctx: _AxisContext, s: ServiceLevel, axis: str) -> ServiceParametric
         reasons.append("no Weibull bound: too few effective PL samples (see the axis notes)")
     else:
         try:
-            wb = weibull_bound(ctx.weibull, ctx.cov, al, ctx.confidence)
+            wb = weibull_bound(ctx.weibull, ctx.cov, al, ctx.confidence, dof=ctx.pl_n_effective - 2.0)
         except ValueError as exc:
             reasons.append(str(exc))
     if ctx.bound_fit is None:
