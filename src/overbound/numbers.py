@@ -14,6 +14,7 @@ __all__ = [
     "TINY",
     "format_percent",
     "format_probability",
+    "format_share",
     "log10_or_none",
     "mantissa_exponent",
 ]
@@ -83,3 +84,17 @@ def format_percent(x: float | None, digits: int = 3) -> str:
     if x is None or not math.isfinite(x):
         return "n.a."
     return f"{100.0 * x:.{digits}f} %"
+
+
+def format_share(n: int, total: int) -> str:
+    """``n/total`` in percent with just enough decimals not to round a nonzero share to 0 or 100."""
+    if total <= 0:
+        return "n.a."
+    if n == 0 or n == total:
+        return f"{100 * n // total} %"
+    p = 100.0 * n / total
+    for decimals in range(2, 10):
+        text = f"{p:.{decimals}f}"
+        if float(text) not in (0.0, 100.0):
+            return f"{text} %"
+    return f"{p:.2e} %"

@@ -28,6 +28,7 @@ from matplotlib.patches import Polygon
 from matplotlib.ticker import FuncFormatter, NullLocator
 
 from overbound.methods.counting import Region, StanfordCounts, StanfordHistogram
+from overbound.numbers import format_share
 from overbound.report.style import STYLE, close_figure, count_label, figure_png, new_figure, style
 
 __all__ = [
@@ -38,7 +39,6 @@ __all__ = [
     "close_figure",
     "envelope",
     "figure_png",
-    "format_percent",
     "new_figure",
     "plot_safety_index",
     "plot_stanford",
@@ -69,20 +69,6 @@ _PL_COLOUR = "#d9711c"
 _AL_COLOUR = "#c0201a"
 _ENVELOPE_BINS = 2000
 _SI_BINS = 200
-
-
-def format_percent(n: int, total: int) -> str:
-    """``n/total`` in percent with just enough decimals not to round a nonzero share to 0 or 100."""
-    if total <= 0:
-        return "n.a."
-    if n == 0 or n == total:
-        return f"{100 * n // total} %"
-    p = 100.0 * n / total
-    for decimals in range(2, 10):
-        text = f"{p:.{decimals}f}"
-        if float(text) not in (0.0, 100.0):
-            return f"{text} %"
-    return f"{p:.2e} %"
 
 
 # ---------------------------------------------------------------------------
@@ -222,7 +208,7 @@ def plot_stanford(
             ax.text(
                 x,
                 y,
-                f"{label}\n{n:,} ({format_percent(n, total)})",
+                f"{label}\n{n:,} ({format_share(n, total)})",
                 ha="center",
                 va="center",
                 fontsize=7,

@@ -33,12 +33,12 @@ from overbound.methods.counting import (
     ServiceKPI,
 )
 from overbound.methods.tail_extrapolation import TailAnalysis
+from overbound.numbers import format_share
 from overbound.report.confidence import confidence_section_html
 from overbound.report.evt import analysed_series, evt_failure_html, evt_section_html
 from overbound.report.figures import (
     REGION_COLOURS,
     REGION_LABELS,
-    format_percent,
     plot_safety_index,
     plot_stanford,
     plot_timeseries,
@@ -283,8 +283,8 @@ def _overview(a: Analysis) -> str:
         ),
         (f"Station{'s' if len(c.stations) != 1 else ''}", _e(", ".join(c.stations) or "none")),
         ("Epochs", f"{c.n_total:,}"),
-        ("with a solution", f"{c.n_with_solution:,} ({format_percent(c.n_with_solution, c.n_total)})"),
-        ("without a solution", f"{no_sol:,} ({format_percent(no_sol, c.n_total)})"),
+        ("with a solution", f"{c.n_with_solution:,} ({format_share(c.n_with_solution, c.n_total)})"),
+        ("without a solution", f"{no_sol:,} ({format_share(no_sol, c.n_total)})"),
         ("Rows rejected while reading", f"{a.n_rejected:,}"),
         ("Service levels", _e(", ".join(s.name for s in a.services))),
     ]
@@ -429,7 +429,7 @@ def _stations(a: Analysis) -> str:
 
 
 def _h_pct(k: AxisKPI, n_total: int) -> str:
-    return "n.a." if k.availability is None else format_percent(k.n_available, n_total)
+    return "n.a." if k.availability is None else format_share(k.n_available, n_total)
 
 
 def _value(v: Verdict) -> str:
@@ -515,7 +515,7 @@ def _kpi_rows(a: Analysis, s: ServiceLevel, k: ServiceKPI) -> list[list[str]]:
             [
                 "Availability",
                 _e(x.axis),
-                _num(format_percent(x.n_available, n_total)),
+                _num(format_share(x.n_available, n_total)),
                 _availability_counts(x, n_total),
                 _num("—"),
                 "—",
@@ -525,7 +525,7 @@ def _kpi_rows(a: Analysis, s: ServiceLevel, k: ServiceKPI) -> list[list[str]]:
         "availability (combined)",
         "combined",
         _availability_counts(k.combined, n_total),
-        format_percent(k.combined.n_available, n_total),
+        format_share(k.combined.n_available, n_total),
     )
     for x in axes:
         risk = x.continuity.risk if x.continuity else None
@@ -568,7 +568,7 @@ def _stanford_table(a: Analysis, s: ServiceLevel, k: ServiceKPI) -> str:
         for r in regions:
             n = getattr(x.stanford, r.key)
             cls = ' class="alarm"' if r in (Region.HMI, Region.UNAVAILABLE_MI, Region.MI) and n else ""
-            cells.append(_num(f"<span{cls}>{n:,}</span><br><small>{format_percent(n, total)}</small>"))
+            cells.append(_num(f"<span{cls}>{n:,}</span><br><small>{format_share(n, total)}</small>"))
         hist = a.counting.histogram(axis, x.alert_limit)
         rows.append(
             [
