@@ -8,6 +8,7 @@ import signal
 import numpy as np
 import polars as pl
 import pytest
+from matplotlib.ticker import FuncFormatter
 
 from overbound.analysis import analyze
 from overbound.methods.confidence_level import confidence_analysis
@@ -57,6 +58,7 @@ def test_report_drawn_by_workers_is_byte_identical():
     with parallel_figures(2) as renderer:
         assert renderer is not None and active_renderer() is renderer
         pooled = render_report(analysis)
+        assert renderer.fallbacks() == 0  # every figure was drawn by a worker
     assert active_renderer() is None
     assert "<overbound-figure-" not in pooled
     assert pooled.count("<img ") == inline.count("<img ") > 10
@@ -79,6 +81,19 @@ def test_placeholders_resolve_only_inside_the_block():
         assert resolve_figures(html).startswith('<figure><img src="data:image/png;base64,')
     with pytest.raises(RuntimeError, match="parallel_figures"):  # a page finished after its pool is gone
         resolve_figures(html)
+    with parallel_figures(2), pytest.raises(RuntimeError, match="another"):  # or in another pool's block
+        resolve_figures(html)
+
+
+def test_figure_that_does_not_pickle_is_drawn_inline():
+    def unpicklable():
+        ax = _axes("c")
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda v, _p: f"{v:.1f}"))  # a lambda: no pickle
+        return ax
+
+    inline = figure_html(unpicklable(), name="c", alt="c", caption="c")
+    with parallel_figures(2):
+        assert figure_html(unpicklable(), name="c", alt="c", caption="c") == inline
 
 
 def test_pool_gone_or_worker_killed_draws_in_this_process():

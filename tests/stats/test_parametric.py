@@ -366,8 +366,11 @@ def test_weibull_bound_student_quantile_for_few_effective_samples():
     for bad in (0.0, -1.0, math.nan, math.inf):
         with pytest.raises(ValueError, match="dof"):
             weibull_bound(f, cov, al, c, dof=bad)
-    with pytest.raises(ValueError, match="a = 0"):  # a bound whose scale underflows is no bound
+    with pytest.raises(ValueError, match="outside floating point"):  # a scale that underflows is no bound
         weibull_bound(f, np.array([[1e6, 0.0], [0.0, 1e-8]]), al, c, dof=1.0)
+    with pytest.raises(ValueError, match="outside floating point"):  # nor one that overflows (AL < 1)
+        small = WeibullFit(0.01, 2.0, 100, True, 0)
+        weibull_bound(small, np.array([[1.0, 1.0], [1.0, 2.0]]), 0.01, c, dof=0.2)
 
 
 def test_weibull_pdf_band_is_the_delta_method():

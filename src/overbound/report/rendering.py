@@ -9,9 +9,11 @@ until :func:`resolve_figures` swaps in the finished ``<figure>``.
 - **The same bytes.** A pickled and unpickled figure draws to the same PNG as the original (the report
   tests compare the pages written both ways); workers are started with ``spawn`` (polars is not
   fork-safe), and nothing in the pages depends on which process drew what.
-- **Nothing lost.** A figure a worker fails to draw (a worker killed, a pool broken) is drawn again in
-  the main process from the same pickle; an exception of the figure itself is raised as it would be
-  inline.
+- **Nothing lost.** A figure a worker fails to draw (a worker killed, a pool broken, a class the worker
+  cannot import) is drawn again in the main process from the same pickle; one that does not pickle is
+  drawn in the main process at once; an exception of the figure itself is raised as it would be inline.
+  Where no pool can be started, every figure is drawn inline. Placeholders name their pool: one resolved
+  in another block is an error, never another figure.
 - **Off by default in the library.** Without :func:`parallel_figures` active, :func:`submit_figure`
   is not used and every figure is drawn inline (:func:`overbound.report.page.figure_html`); the CLI
   turns the pool on (``OVERBOUND_FIGURE_PROCESSES``, default: the cores available, at most 4; 0 or 1
@@ -22,10 +24,12 @@ from __future__ import annotations
 
 import contextlib
 import contextvars
+import itertools
 import multiprocessing
 import os
 import pickle
 import re
+import signal
 from collections.abc import Callable, Iterator
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
@@ -50,17 +54,28 @@ ENV_PROCESSES = "OVERBOUND_FIGURE_PROCESSES"
 _MAX_PROCESSES = 4
 #: Niceness added to the workers: on a machine with few cores their start-up must not slow the analysis.
 _NICE = 5
-_PLACEHOLDER = re.compile(r"<overbound-figure-(\d+)>")
+_PLACEHOLDER = re.compile(r"<overbound-figure-(\d+)-(\d+)>")
+_RENDERERS = itertools.count(1)
 _ACTIVE: contextvars.ContextVar[FigureRenderer | None] = contextvars.ContextVar("renderer", default=None)
+
+
+class _Unpicklable(Exception):
+    """A figure the worker could not unpickle: drawn again in the main process."""
 
 
 def _draw(payload: bytes, dpi: float) -> bytes:
     """Worker side: unpickle one figure and draw it to PNG bytes."""
-    return figure_png(pickle.loads(payload), dpi=dpi)
+    try:
+        fig = pickle.loads(payload)
+    except Exception as exc:  # a class the worker cannot import: the main process can
+        raise _Unpicklable(str(exc)) from None
+    return figure_png(fig, dpi=dpi)
 
 
 def _warm() -> None:
-    """Worker start-up: load matplotlib's Agg backend and fonts before the first figure arrives."""
+    """Worker start-up: leave Ctrl-C to the main process (which stops the pool), and load matplotlib's Agg
+    backend and fonts before the first figure arrives."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     fig = Figure(figsize=(1, 1))
     fig.add_subplot().set_title("0")
     figure_png(fig, dpi=10)
@@ -75,34 +90,54 @@ class FigureRenderer:
 
     def __init__(self, processes: int) -> None:
         ctx = multiprocessing.get_context("spawn")
+        self._token = next(_RENDERERS)
+        self._keys = itertools.count()
         self._pool = ProcessPoolExecutor(max_workers=processes, mp_context=ctx, initializer=_warm)
         self._jobs: dict[int, tuple[bytes, float, Future[bytes], Callable[[bytes], str]]] = {}
-        for _ in range(processes):  # start and warm the workers now, while the analysis runs
-            self._pool.submit(_ready)
+        try:
+            for _ in range(processes):  # start and warm the workers now, while the analysis runs
+                self._pool.submit(_ready)
+        except BaseException:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+            raise
         for pid in getattr(self._pool, "_processes", None) or ():
             with contextlib.suppress(OSError, AttributeError):  # their start-up yields to the analysis
                 os.setpriority(os.PRIO_PROCESS, pid, min(os.getpriority(os.PRIO_PROCESS, pid) + _NICE, 19))
 
     def submit(self, fig: Figure, *, dpi: float, wrap: Callable[[bytes], str]) -> str:
-        """Queue ``fig`` for drawing; ``wrap(png)`` later makes its HTML. Returns the placeholder."""
-        payload = pickle.dumps(fig, protocol=pickle.HIGHEST_PROTOCOL)
-        key = len(self._jobs)
+        """Queue ``fig`` for drawing; ``wrap(png)`` later makes its HTML. Returns the placeholder, or the
+        finished HTML of a figure that does not pickle (drawn here at once)."""
+        try:
+            payload = pickle.dumps(fig, protocol=pickle.HIGHEST_PROTOCOL)
+        except Exception:  # a lambda formatter, an object of a notebook's __main__...
+            return wrap(figure_png(fig, dpi=dpi))
+        key = next(self._keys)
         try:
             future = self._pool.submit(_draw, payload, dpi)
         except (BrokenProcessPool, RuntimeError):  # the pool is gone: draw in this process at resolve
             future = Future()
             future.set_exception(BrokenProcessPool("figure pool unavailable"))
         self._jobs[key] = (payload, dpi, future, wrap)
-        return f"<overbound-figure-{key}>"
+        return f"<overbound-figure-{self._token}-{key}>"
 
-    def html(self, key: int) -> str:
+    def html(self, token: int, key: int) -> str:
         """The finished HTML of figure ``key`` (drawn here if its worker could not)."""
+        if token != self._token:
+            raise RuntimeError("a figure placeholder of another parallel_figures() block")
         payload, dpi, future, wrap = self._jobs[key]
         try:
             png = future.result()
-        except BrokenProcessPool:
-            png = _draw(payload, dpi)
+        except (BrokenProcessPool, _Unpicklable):
+            png = figure_png(pickle.loads(payload), dpi=dpi)
         return wrap(png)
+
+    def fallbacks(self) -> int:
+        """Figures resolved so far that no worker drew (pool broken or figure not unpicklable there)."""
+        return sum(
+            1
+            for _, _, f, _ in self._jobs.values()
+            if f.done() and isinstance(f.exception(), BrokenProcessPool | _Unpicklable)
+        )
 
     def close(self, *, wait: bool = True) -> None:
         """Stop the workers, cancelling figures not yet resolved; ``wait=False`` returns at once."""
@@ -115,7 +150,7 @@ def default_processes() -> int:
     value = os.environ.get(ENV_PROCESSES, "").strip()
     if value:
         try:
-            return max(int(value), 0)
+            return min(max(int(value), 0), 64)
         except ValueError:
             raise ValueError(f"{ENV_PROCESSES}={value!r}: expected a whole number of processes") from None
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
@@ -127,10 +162,15 @@ def parallel_figures(processes: int | None = None) -> Iterator[FigureRenderer | 
     """Draw the figures of the pages written inside this block in ``processes`` worker processes
     (default :func:`default_processes`); with fewer than 2, draw them inline (yields ``None``)."""
     n = default_processes() if processes is None else processes
-    if n < 2:
+    renderer = None
+    if n >= 2:
+        try:
+            renderer = FigureRenderer(n)
+        except (OSError, NotImplementedError):  # no process pool here (semaphores, spawn): draw inline
+            renderer = None
+    if renderer is None:
         yield None
         return
-    renderer = FigureRenderer(n)
     token = _ACTIVE.set(renderer)
     failed = True
     try:
@@ -153,4 +193,4 @@ def resolve_figures(text: str) -> str:
     renderer = _ACTIVE.get()
     if renderer is None:
         raise RuntimeError("figure placeholders outside parallel_figures(): resolve inside the block")
-    return _PLACEHOLDER.sub(lambda m: renderer.html(int(m.group(1))), text)
+    return _PLACEHOLDER.sub(lambda m: renderer.html(int(m.group(1)), int(m.group(2))), text)

@@ -96,6 +96,9 @@ def confidence_label(value: float, _pos: object = None) -> str:
     """Tick label of a confidence level on a logit axis: ``10⁻ᵏ`` near 0, ``1−10⁻ᵏ`` near 1."""
     if value >= 0.5:
         q = 1.0 - value
+        if q > 0:  # 1 - value carries the rounding of value: snap to the power of ten it stands for
+            k = round(math.log10(q))
+            q = 10.0**k if abs(q / 10.0**k - 1.0) < 1e-6 else q
         return "1" if q <= 0 else (f"{value:g}" if q >= 1e-3 else f"1−{power_label(q)}")
     return f"{value:g}" if value >= 1e-3 else power_label(value)
 
@@ -108,17 +111,16 @@ def power_label(value: float, _pos: object = None) -> str:
 
     matplotlib's default labels are mathtext (``$10^{-3}$``), whose parser costs about 25 ms per new
     label in every process that draws; DejaVu Sans has the superscript glyphs, so the text is the same.
+    The mantissa is rounded to three digits before the power is chosen (9.9999999e-4 is ``10⁻³``).
     """
     if not math.isfinite(value) or value <= 0:
         return ""
-    exp = math.floor(math.log10(value) + 1e-12)
-    mant = value / 10.0**exp
-    if mant >= 9.9999999:  # 10**k computed a hair below the power
-        mant, exp = mant / 10.0, exp + 1
-    if exp in (0, 1) and abs(mant - round(mant)) < 1e-9:
-        return f"{round(mant) * 10**exp:d}"
+    mant_text, exp_text = f"{value:.2e}".split("e")
+    mant, exp = float(mant_text), int(exp_text)
+    if exp in (0, 1):
+        return f"{mant * 10**exp:g}"
     power = "10" + str(exp).translate(_SUPERSCRIPT)
-    return power if abs(mant - 1.0) < 1e-9 else f"{mant:.3g}·{power}"
+    return power if mant == 1.0 else f"{mant:g}·{power}"
 
 
 def log_scale(ax: Axes, which: str = "y") -> None:

@@ -726,8 +726,8 @@ def weibull_bound(
     ------
     ValueError
         Bad ``cov``, ``alert_limit``, ``confidence`` or ``dof``; or the bound point has :math:`b \le 0`
-        or an underflowing :math:`a` (the effective sample is too small for this confidence: the
-        linearisation is meaningless).
+        or an :math:`a` that underflows or overflows (the effective sample is too small for this
+        confidence: the linearisation is meaningless).
     """
     al = _alert_limit(alert_limit)
     if dof is None:
@@ -748,10 +748,13 @@ def weibull_bound(
     b_b = fit.b + float(d[1])
     if not b_b > 0.0:
         raise ValueError(f"Weibull bound at confidence {confidence} has b <= 0: too few effective samples")
-    a_b = math.exp(math.log(fit.a) + float(d[0]))
-    if not a_b > 0.0:
-        raise ValueError(f"Weibull bound at confidence {confidence} has a = 0: too few effective samples")
-    return WeibullFit(a_b, b_b, fit.n, fit.converged, fit.iterations)
+    ln_a_b = math.log(fit.a) + float(d[0])
+    if not -745.0 < ln_a_b < 709.0:  # exp would underflow to 0 or overflow
+        raise ValueError(
+            f"Weibull bound at confidence {confidence} has a = exp({ln_a_b:.4g}), outside floating point: "
+            "too few effective samples"
+        )
+    return WeibullFit(math.exp(ln_a_b), b_b, fit.n, fit.converged, fit.iterations)
 
 
 def weibull_pdf_band(
