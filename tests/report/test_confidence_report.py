@@ -151,7 +151,7 @@ def test_plot_band_errors_draws_the_pl_lines(analysis):
 
 
 def test_section_html(analysis, monkeypatch):
-    monkeypatch.setattr("overbound.report.confidence._MAX_DETAIL_BINS", 2)  # 6 by default; fewer to draw
+    monkeypatch.setattr("overbound.report.confidence._MAX_DETAIL_BINS", 2)  # 4 by default; fewer to draw
     text = confidence_section_html(analysis)
     assert text.startswith('<section id="confidence-vertical">\n<h2>Vertical PL confidence level</h2>')
     rows = re.findall(r'<tr( class="suspect")? data-bin="(\d+)">', text)

@@ -59,8 +59,10 @@ SCHEMA = "overbound.confidence/1"
 REPORT_NAME = "confidence.html"
 #: Confidence levels are drawn on a logit axis clipped to [_CL_FLOOR, 1 - _CL_FLOOR].
 _CL_FLOOR = 1e-6
-#: At most this many suspect bins get their own figures (the lowest CLs first).
-_MAX_DETAIL_BINS = 6
+#: At most this many suspect bins get their own figures (the lowest CLs first): neighbouring bands share
+#: most of their samples (a band is widened to reach its 200), so more figures would repeat the same
+#: picture at the cost of drawing it; the table lists every suspect band.
+_MAX_DETAIL_BINS = 4
 _PE = {"vertical": "VPE", "horizontal": "HPE"}
 _PL = {"vertical": "VPL", "horizontal": "HPL"}
 _ABS = {"vertical": "|VPE|", "horizontal": "HPE"}
@@ -456,7 +458,7 @@ def confidence_section_html(analysis: ConfidenceAnalysis) -> str:
     figure (:func:`plot_confidence`), the table of non-empty bins (target, band, n,
     :math:`\\hat m`, :math:`\\hat\\sigma`, :math:`\\hat\\Sigma`, CL, ideal PL, PL1, PL99,
     max |error|, max ratio; suspect rows carry ``class="suspect"``), and for the suspect
-    bins (the 6 lowest CLs) and the worst bin, their histogram and figure-8 plot. Figures
+    bins (the 4 lowest CLs) and the worst bin, their histogram and figure-8 plot. Figures
     are inline base64 PNGs: the fragment loads nothing. Classes used: ``num``, ``alarm``,
     ``figrow`` (those of ``report.html``) and ``suspect``.
     """
