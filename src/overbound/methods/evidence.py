@@ -187,7 +187,7 @@ def effective_size(flags: np.ndarray, interval_s: float, fallback_s: float) -> t
     if k in (0, n):
         tau = max(1.0, fallback_s / interval_s)
         return max(1.0, n / tau), tau * interval_s, True
-    tau = integrated_autocorrelation(flags.astype(np.float32))
+    tau = integrated_autocorrelation(flags)
     return n / tau, tau * interval_s, False
 
 
@@ -321,21 +321,27 @@ def _station(
     confidence: float,
 ) -> tuple[StationEvidence, dict]:
     interval = d.interval_s or 1.0
+    t_s = d.t_us / 1e6
     partial: dict = {}
     out: dict[str, ServiceEvidence] = {}
+    done: dict[tuple, tuple] = {}  # services with the same limits and window (APV-I, LPV) count once
     for s in services:
-        avail = _available(d, s)
-        n_eff, tau_s, assumed = effective_size(avail, interval, fallback_s)
-        events = loss_events(d.t_us / 1e6, avail, interval, s.continuity_window_s)
-        partial[s.name] = _Partial(avail.size, n_eff, tau_s, assumed, events)
-        mi, hmi = {}, {}
-        for a in _AXES:
-            al = s.alert_limit(a)
-            if al is not None:
-                mi[a], hmi[a] = _events(d, a, al, gap_s)
+        key = (s.hal, s.val, s.continuity_window_s)
+        if key not in done:
+            avail = _available(d, s)
+            n_eff, tau_s, assumed = effective_size(avail, interval, fallback_s)
+            events = loss_events(t_s, avail, interval, s.continuity_window_s)
+            mi, hmi = {}, {}
+            for a in _AXES:
+                al = s.alert_limit(a)
+                if al is not None:
+                    mi[a], hmi[a] = _events(d, a, al, gap_s)
+            done[key] = (avail.size, n_eff, tau_s, assumed, events, mi, hmi)
+        size, n_eff, tau_s, assumed, events, mi, hmi = done[key]
+        partial[s.name] = _Partial(size, n_eff, tau_s, assumed, events)
         k = counting.services[s.name]
         out[s.name] = ServiceEvidence(
-            _availability(k.combined.n_available, avail.size, n_eff, tau_s, assumed, confidence),
+            _availability(k.combined.n_available, size, n_eff, tau_s, assumed, confidence),
             _continuity(k.combined.continuity, events, confidence),
             mi,
             hmi,
