@@ -270,8 +270,9 @@ def _tail_counts(d: _Arrays, axis: str, gap_s: float) -> TailCounts:
         epochs.append(int(np.count_nonzero(above)))
         clusters.append(run_clusters(d.t_us[above] / 1e6, gap_s))
     if n:
-        i = int(np.nanargmax(si))
-        mx, tmax = float(si[i]), _iso(d.t_us[i] / 1e6)
+        mx = float(np.fmax.reduce(si))  # NaN-skipping maximum without nanargmax's copy
+        i = int(np.argmax(si == mx))
+        tmax = _iso(d.t_us[i] / 1e6)
     else:
         mx, tmax = None, None
     return TailCounts(axis, SI_LEVELS, n, tuple(epochs), tuple(clusters), mx, tmax, gap_s)

@@ -121,16 +121,19 @@ def integrated_autocorrelation(
     True
     """
     x = np.asarray(x)
-    if x.dtype == np.bool_:
-        x = x.view(np.uint8)
     n = x.size
     if n < 3:
         return 1.0
+    if x.dtype == np.bool_:  # a 0/1 series: its variance is p (1 - p), no pass over a float copy
+        p = np.count_nonzero(x) / n
+        x, vx = x.view(np.uint8), p * (1.0 - p)
+    else:
+        vx = None
     if n > max_points:
         b = -(-n // max_points)
         m = n // b
         y = x[: m * b].reshape(m, b).mean(axis=1, dtype=np.float64)
-        vx, vy = float(x.var(dtype=np.float64)), float(y.var())
+        vx, vy = float(x.var(dtype=np.float64) if vx is None else vx), float(y.var())
         if vx <= 0.0:
             return 1.0
         return max(1.0, b * integrated_autocorrelation(y, max_lag=max_lag) * vy / vx)
