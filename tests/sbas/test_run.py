@@ -41,6 +41,25 @@ def test_process_is_run_sbas_on_the_files():
     assert set(run.epochs["geo"].to_list()) == {123}
 
 
+def test_every_engine_option_reaches_the_engine_and_the_record():
+    """``relativity="rv"`` was dropped when the options were rebuilt per GEO (issue 13): it now gives
+    the engine's rv results, and the metadata records every option."""
+    from overbound.sbas.engine import SbasOptions
+
+    opt = SbasOptions(relativity="rv")
+    run = process(OBS, NAV, EMS, options=opt)
+    obs, _ = read_rinex_obs(OBS)
+    nav, _ = read_rinex_nav(NAV)
+    frames, _ = read_ems(EMS)
+    ref = obs.header.approx_position
+    direct = run_sbas(obs.table, nav.table, decode(frames), ref, station="SYNT", options=opt)
+    kepler = process(OBS, NAV, EMS)
+    assert run.epochs.drop("geo").equals(direct.epochs)
+    assert not run.epochs["vpe"].equals(kepler.epochs["vpe"])  # the term changes the ranges (cm)
+    assert run.metadata()["sbas"]["options"]["relativity"] == "rv"
+    assert kepler.metadata()["sbas"]["options"]["relativity"] == "kepler"
+
+
 def test_duplicate_observations_are_dropped_and_counted(tmp_path):
     """The same file given twice (or overlapping files): the first record is kept, the rest counted."""
     once = process(OBS, NAV, EMS)

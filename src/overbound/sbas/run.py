@@ -35,7 +35,7 @@ import io
 import re
 from collections import Counter
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -127,13 +127,7 @@ class SbasRun:
                 "reference_ecef": [round(v, 4) for v in self.reference_ecef],
                 "reference_llh": [round(lat, 9), round(lon, 9), round(h, 4)],
                 "reference_source": self.reference_source,
-                "options": {
-                    "mode": self.options.mode,
-                    "mask_deg": self.options.mask_deg,
-                    "geo": self.options.geo,
-                    "flight_time": self.options.flight_time,
-                    "aad": self.options.aad,
-                },
+                "options": asdict(self.options),  # every engine option, so none is lost from the record
                 "inputs": [{"role": role, **r.to_dict()} for role, r in self.reports],
                 "counts": self.counts,
             }
@@ -495,9 +489,7 @@ def _run(inp: SbasInputs, msgs, ref, opt: SbasOptions, schedule: pl.DataFrame) -
     for g in schedule["geo"].unique().sort().to_list():
         times = schedule.filter(pl.col("geo") == g)["time"]
         obs = inp.obs.filter(pl.col("time").is_in(times.implode()))
-        o = SbasOptions(
-            mode=opt.mode, mask_deg=opt.mask_deg, geo=int(g), flight_time=opt.flight_time, aad=opt.aad
-        )
+        o = replace(opt, geo=int(g))  # every other option as given (relativity was once dropped here)
         r = run_sbas(obs, inp.eph, msgs, ref, station=inp.station, options=o, klobuchar=inp.klobuchar)
         geo_col = pl.lit(g, pl.Int16).alias("geo")
         parts.append((r.epochs.with_columns(geo_col), r.satellites.with_columns(geo_col), r.counts))
