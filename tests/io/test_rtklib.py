@@ -153,6 +153,18 @@ EXPECTED: dict[str, tuple] = {
         {},
         "20: duplicate time: 2006-12-27 00:06:00 repeats line 19",
     ),
+    "year-0000.pos": (
+        7,
+        {"malformed_line": 1},
+        {},
+        "18: malformed line: time '0000/12/27 00:05:30.000' outside 1980-01-06 to 2099 (GPS)",
+    ),
+    "year-9999.pos": (
+        7,
+        {"malformed_line": 1},
+        {},
+        "20: malformed line: time '9999/12/27 00:06:30.000' outside 1980-01-06 to 2099 (GPS)",
+    ),
     "negative-hpl.pos": (8, {}, {"negative_pl": 1}, "19: negative_pl: solution set to no-solution"),
     "nan-vpl.pos": (8, {}, {"nan_pl": 1}, "20: nan_pl: solution set to no-solution"),
     "backward-time.pos": ("backward time 2006-12-27 00:05:45 after 2006-12-27 00:06:30", 21),

@@ -53,6 +53,9 @@ _FORMAT = "rtklib-pos"
 _GPS_EPOCH_UNIX_S = 315_964_800  # 1980-01-06T00:00:00 as seconds since 1970-01-01
 _WEEK_S = 604_800
 _US = 1_000_000
+#: Epochs outside [GPS epoch, 2100) are rejected as malformed: a corrupted year (0000, 9999) would
+#: otherwise span millennia and make the 1 Hz grids of the analysis allocate gigabytes (issue 13).
+_ERA_US = (_GPS_EPOCH_UNIX_S * _US, 4_102_444_800 * _US)  # 1980-01-06, 2100-01-01
 _JST_UTC_S = 9 * 3600  # JST = UTC + 9 h (RTKLIB TIMES_JST)
 _TIME_SYSTEMS = ("GPST", "UTC", "JST")
 _SEPARATORS = (",", ";", "|")  # non-blank field separators we undo (RTKLIB out-fieldsep)
@@ -426,6 +429,10 @@ def _parse_fields(raw: pl.DataFrame, header: PosHeader) -> pl.DataFrame:
         pl.format(f"malformed line: expected {header.n_fields} fields, got {{}}", n)
     )
     reason = reason.when(time.is_null()).then(pl.format("malformed line: bad time '{} {}'", tok(0), tok(1)))
+    t_us = time.dt.epoch("us")
+    reason = reason.when((t_us < _ERA_US[0]) | (t_us >= _ERA_US[1])).then(
+        pl.format("malformed line: time '{} {}' outside 1980-01-06 to 2099 (GPS)", tok(0), tok(1))
+    )
     for bad, why in checks:
         reason = reason.when(bad).then(why)
     reason = reason.otherwise(pl.lit(None, pl.String))
