@@ -33,9 +33,8 @@ from overbound.methods.confidence_level import (
     confidence_analysis,
 )
 from overbound.numbers import PRINT_FLOOR
-from overbound.report.figures import new_figure, style
 from overbound.report.page import escape, figure_html, section_html, write_page
-from overbound.report.style import confidence_label, log_scale
+from overbound.report.style import confidence_label, log_scale, new_figure, style
 from overbound.stats.overbounding import SigmaInflation
 
 __all__ = [

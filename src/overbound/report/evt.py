@@ -42,7 +42,6 @@ from overbound.report.evt_figures import (
     plot_tail_fit,
     plot_vk,
 )
-from overbound.report.figures import style
 from overbound.report.page import (
     badge,
     escape,
@@ -53,6 +52,7 @@ from overbound.report.page import (
     section_html,
     write_page,
 )
+from overbound.report.style import style
 from overbound.stats.dependence import VKCurve
 
 __all__ = [

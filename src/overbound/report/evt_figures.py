@@ -32,8 +32,8 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.transforms import blended_transform_factory
 
-from overbound.report.figures import envelope, new_figure, style
-from overbound.report.style import log_scale
+from overbound.report.figures import envelope
+from overbound.report.style import log_scale, new_figure, style
 from overbound.stats.dependence import Clusters, VKCurve
 from overbound.stats.evt import GPDFit
 from overbound.stats.threshold import ShapeStability

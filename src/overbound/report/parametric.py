@@ -44,7 +44,7 @@ from overbound.methods.parametric import (
     write_parametric,
 )
 from overbound.methods.pooling import PE_PL
-from overbound.report.figures import plot_timeseries, style
+from overbound.report.figures import plot_timeseries
 from overbound.report.page import (
     BELOW_FLOOR_HTML,
     badge,
@@ -71,6 +71,7 @@ from overbound.report.parametric_figures import (
     plot_ratio_timeseries,
     plot_weibull_probability,
 )
+from overbound.report.style import style
 from overbound.services import ServiceLevel
 
 __all__ = [

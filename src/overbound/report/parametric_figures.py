@@ -36,8 +36,8 @@ from matplotlib.transforms import blended_transform_factory
 from scipy import special
 
 from overbound.numbers import TINY, format_probability, mantissa_exponent
-from overbound.report.figures import envelope, new_figure, style
-from overbound.report.style import log_scale
+from overbound.report.figures import envelope
+from overbound.report.style import log_scale, new_figure, style
 from overbound.stats.continuity import ContinuityCurve, LogLinearFit
 from overbound.stats.parametric import (
     RatioFit,

@@ -14,8 +14,8 @@ until :func:`resolve_figures` swaps in the finished ``<figure>``.
   drawn in the main process at once; an exception of the figure itself is raised as it would be inline.
   Where no pool can be started, every figure is drawn inline. Placeholders name their pool: one resolved
   in another block is an error, never another figure.
-- **Off by default in the library.** Without :func:`parallel_figures` active, :func:`submit_figure`
-  is not used and every figure is drawn inline (:func:`overbound.report.page.figure_html`); the CLI
+- **Off by default in the library.** Without :func:`parallel_figures` active, no pool exists and
+  every figure is drawn inline (:func:`overbound.report.page.figure_html`); the CLI
   turns the pool on (``OVERBOUND_FIGURE_PROCESSES``, default: the cores available, at most 4; 0 or 1
   draws inline).
 """
@@ -132,7 +132,7 @@ class FigureRenderer:
         return wrap(png)
 
     def fallbacks(self) -> int:
-        """Figures resolved so far that no worker drew (pool broken or figure not unpicklable there)."""
+        """Figures resolved so far that no worker drew (pool broken, or not unpicklable in the worker)."""
         return sum(
             1
             for _, _, f, _ in self._jobs.values()
@@ -164,10 +164,8 @@ def parallel_figures(processes: int | None = None) -> Iterator[FigureRenderer | 
     n = default_processes() if processes is None else processes
     renderer = None
     if n >= 2:
-        try:
+        with contextlib.suppress(OSError, NotImplementedError):  # no process pool here: draw inline
             renderer = FigureRenderer(n)
-        except (OSError, NotImplementedError):  # no process pool here (semaphores, spawn): draw inline
-            renderer = None
     if renderer is None:
         yield None
         return

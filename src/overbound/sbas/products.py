@@ -192,7 +192,8 @@ def write_subsets(product: SubsetsProduct, run: SbasRun, path: str | Path) -> tu
 
 def _subsets_png(product: SubsetsProduct) -> bytes:
     """A row of two Stanford diagrams (horizontal, vertical) per service, in subset units."""
-    from overbound.report.figures import close_figure, figure_png, new_figure, plot_stanford
+    from overbound.report.figures import plot_stanford
+    from overbound.report.style import close_figure, figure_png, new_figure
 
     n = len(product.services)
     fig = new_figure(10.0, 4.6 * n)

@@ -702,9 +702,9 @@ def weibull_bound(
         the normal (the paper's Wald bound). :func:`overbound.methods.parametric.parametric_analysis`
         passes :math:`n_e - 2`: the covariance is itself estimated from :math:`n_e` effective samples
         with two parameters, and on a campaign of few decorrelation times the normal quantile left the
-        unavailability bound below the truth in 10-20 % of campaigns (validation/parametric_coverage.py,
-        1800 s PL decorrelation over 6.5 h) — the same small-sample reasoning as :func:`ratio_bound`'s
-        :math:`t` and :math:`\chi^2` quantiles.
+        unavailability bound below the truth in 5.5-9 % of campaigns (validation/parametric_coverage.py,
+        1800 s PL decorrelation over 6.5 h; 2-6 % with the t quantile) — the same small-sample
+        reasoning as :func:`ratio_bound`'s :math:`t` and :math:`\chi^2` quantiles.
 
     Returns
     -------
