@@ -127,17 +127,17 @@ def test_overall_rule():
     assert overall_verdict([v(NOT_DEMONSTRATED), v(FAIL)]).verdict == FAIL
 
 
+def _analyze_all(table, services):
+    """Every method on ``table`` (vertical confidence level, both EVT axes, parametric; 100 resamples)."""
+    return analyze(
+        table, services=services, confidence=("vertical",), evt=None, parametric=True, evt_n_boot=100
+    )
+
+
 @pytest.fixture(scope="module")
 def gaussian_campaign():
     sim = simulate(SimulationConfig(days=3, seed=7, sigma_ratio=0.5, tail_fraction=0.0))
-    return analyze(
-        sim.table,
-        services=["NPA", "LPV-200"],
-        confidence=("vertical",),
-        evt=None,
-        parametric=True,
-        evt_n_boot=100,
-    )
+    return _analyze_all(sim.table, ["NPA", "LPV-200"])
 
 
 def test_well_overbounded_campaign_passes_pl_bounding_on_the_floored_evt(gaussian_campaign):
@@ -185,14 +185,7 @@ def _consistent(v) -> bool:
 @pytest.mark.parametrize("anomaly", ["band:15:16:3", "bias:30:1800:12:vertical"])
 def test_anomalies_fail_pl_bounding_and_verdicts_match_their_evidence(anomaly):
     sim = simulate(SimulationConfig(days=3, seed=5, tail_fraction=0.0, anomalies=(anomaly,)))
-    a = analyze(
-        sim.table,
-        services=["APV-I", "LPV-200"],
-        confidence=("vertical",),
-        evt=None,
-        parametric=True,
-        evt_n_boot=100,
-    )
+    a = _analyze_all(sim.table, ["APV-I", "LPV-200"])
     result = assess(a)
     for sv in result.services.values():
         assert sv.pl_bounding.verdict != PASS  # the true risk fails on both anomalies
