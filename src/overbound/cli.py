@@ -20,6 +20,7 @@ from overbound import __version__
 from overbound.io.geodesy import Reference
 from overbound.io.open import FORMATS
 from overbound.io.schema import InputError
+from overbound.output import OutputError, StagedDirectory, staged_directory, staged_files
 
 __all__ = ["main"]
 
@@ -58,6 +59,20 @@ def _draws_figures(command):
     return wrapper
 
 
+@contextlib.contextmanager
+def _staged(out_dir: Path, command: str) -> Iterator[StagedDirectory]:
+    """The command's output directory, written whole or not at all (:mod:`overbound.output`);
+    says which files of an earlier run it removed and which others it kept."""
+    with staged_directory(out_dir, command=command) as stage:
+        yield stage
+    if stage.removed:
+        console.print(f"removed, written by an earlier {command} but not by this one: "
+                      + ", ".join(stage.removed), highlight=False, soft_wrap=True)  # fmt: skip
+    if stage.kept:
+        console.print(f"kept in {out_dir}, not written by this {command}: " + ", ".join(stage.kept),
+                      highlight=False, soft_wrap=True)  # fmt: skip
+
+
 def _reference(lla: str | None, ecef: str | None) -> Reference | None:
     if lla and ecef:
         raise click.UsageError("give --reference or --reference-ecef, not both")
@@ -77,7 +92,7 @@ class _Group(click.Group):
     def invoke(self, ctx: click.Context):
         try:
             return super().invoke(ctx)
-        except (InputError, ValueError) as exc:
+        except (InputError, OutputError, ValueError) as exc:
             console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
             sys.exit(2)
 
@@ -202,18 +217,22 @@ def _read_options(reference, reference_ecef, fmt, station, strict, start, end, c
 @_draws_figures
 def analyze(inputs, out_dir, services, epochs_out, confidence, evt, parametric, **inputs_opts) -> None:
     """Analyse receiver output INPUTS: write OUTPUT/summary.json and OUTPUT/report.html."""
-    paths = _run_analysis(
-        list(inputs),
-        out_dir,
-        services=services,
-        epochs_out=epochs_out,
-        confidence=confidence,
-        evt=evt,
-        parametric=parametric,
-        **_read_options(**inputs_opts),
-    )
-    click.echo(f"report: {paths[1]}")
-    click.echo(f"summary: {paths[0]}")
+    read_options = _read_options(**inputs_opts)
+    with contextlib.ExitStack() as outputs:  # both checked (and locked) before the analysis
+        stage = outputs.enter_context(_staged(out_dir, "analyze"))
+        epochs_path = outputs.enter_context(staged_files(epochs_out)) if epochs_out else None
+        paths = _run_analysis(
+            list(inputs),
+            stage.path,
+            services=services,
+            epochs_out=epochs_path,
+            confidence=confidence,
+            evt=evt,
+            parametric=parametric,
+            **read_options,
+        )
+    click.echo(f"report: {stage.final(paths[1])}")
+    click.echo(f"summary: {stage.final(paths[0])}")
 
 
 def _run_analysis(
@@ -263,7 +282,7 @@ def _run_analysis(
             parametric=parametric,
             progress=step,
         )
-        out_dir.mkdir(parents=True, exist_ok=True)
+        out_dir.mkdir(parents=True, exist_ok=True)  # a demo's subdirectory
         for c in result.confidence:
             write_confidence(c, out_dir / json_name(c.axis))
         for e in result.evt:
@@ -463,10 +482,10 @@ def simulate(
         anomalies=tuple(parse_anomaly(a) for a in anomalies),
         **{k: v for k, v in options.items() if v is not None},
     )
-    with _progress() as bar:
+    with staged_files(out) as staged, _progress() as bar:
         bar.add_task(f"simulating {days:g} days", total=None)
         sim = run(config)
-        write_simulation(sim, out)
+        write_simulation(sim, staged)
     click.echo(
         f"{out}: {sim.table.height} epochs; true P(|VPE|>VPL) per epoch {sim.p_mi_true('vertical'):.3e}, "
         f"true P(HPE>HPL) {sim.p_mi_true('horizontal'):.3e}"
@@ -489,8 +508,10 @@ def convert(source, out, **inputs_opts) -> None:
     from overbound.io.open import read
     from overbound.io.table import write_epochs
 
-    table, report = read(source, **_read_options(**inputs_opts))
-    write_epochs(table, out, report=report)
+    read_options = _read_options(**inputs_opts)
+    with staged_files(out) as staged:
+        table, report = read(source, **read_options)
+        write_epochs(table, staged, report=report)
     click.echo(
         f"{out}: {report.rows_kept} epochs from {report.rows_read} rows ({report.format}); "
         f"rejected {report.n_rejected} {dict(sorted(report.rejected.items()))}; "
@@ -560,14 +581,13 @@ def confidence(
     from overbound.analysis import load_epochs
     from overbound.report.confidence import run_confidence
 
-    with _progress() as bar:
+    read_options = _read_options(**inputs_opts)
+    with _staged(out_dir, "confidence") as stage, _progress() as bar:
         bar.add_task(f"{axis} PL confidence level", total=None)
-        table, _ = load_epochs(
-            list(inputs), columns=("east", "north", "alert"), **_read_options(**inputs_opts)
-        )
+        table, _ = load_epochs(list(inputs), columns=("east", "north", "alert"), **read_options)
         run = run_confidence(
             table,
-            out_dir,
+            stage.path,
             axes=(axis,),
             min_samples=min_samples,
             spacing=spacing,
@@ -586,8 +606,8 @@ def confidence(
         highlight=False,
         soft_wrap=True,
     )
-    click.echo(f"confidence: {path}")
-    click.echo(f"report: {run.report}")
+    click.echo(f"confidence: {stage.final(path)}")
+    click.echo(f"report: {stage.final(run.report)}")
 
 
 def _auto_or_float(*, below: float | None = None, minimum: float | None = None):
@@ -679,12 +699,13 @@ def evt(
     from overbound.analysis import load_epochs
     from overbound.report.evt import run_evt
 
-    with _progress() as bar:
+    read_options = _read_options(**inputs_opts)
+    with _staged(out_dir, "evt") as stage, _progress() as bar:
         bar.add_task(f"{axis} EVT tail extrapolation", total=None)
-        table, _ = load_epochs(list(inputs), columns=("alert",), **_read_options(**inputs_opts))
+        table, _ = load_epochs(list(inputs), columns=("alert",), **read_options)
         run = run_evt(
             table,
-            out_dir,
+            stage.path,
             axis=axis,
             service=service,
             threshold=threshold,
@@ -695,8 +716,8 @@ def evt(
             seed=seed,
         )
     console.print(_evt_line(run.analysis), highlight=False, soft_wrap=True)
-    click.echo(f"evt: {run.json_path}")
-    click.echo(f"report: {run.report}")
+    click.echo(f"evt: {stage.final(run.json_path)}")
+    click.echo(f"report: {stage.final(run.report)}")
 
 
 def _decorrelation_option(ctx, param, value: str) -> str | float:
@@ -733,20 +754,21 @@ def parametric(inputs, out_dir, services, decorrelation, confidence, **inputs_op
     from overbound.analysis import load_epochs
     from overbound.report.parametric import run_parametric
 
-    with _progress() as bar:
+    read_options = _read_options(**inputs_opts)
+    with _staged(out_dir, "parametric") as stage, _progress() as bar:
         bar.add_task("parametric availability, integrity and continuity", total=None)
-        table, _ = load_epochs(list(inputs), columns=("alert",), **_read_options(**inputs_opts))
+        table, _ = load_epochs(list(inputs), columns=("alert",), **read_options)
         run = run_parametric(
             table,
-            out_dir,
+            stage.path,
             services=list(services) or None,
             decorrelation=decorrelation,
             confidence=confidence,
         )
     for line in _parametric_lines(run.analysis):
         console.print(line, highlight=False, soft_wrap=True)
-    click.echo(f"parametric: {run.json_path}")
-    click.echo(f"report: {run.report}")
+    click.echo(f"parametric: {stage.final(run.json_path)}")
+    click.echo(f"report: {stage.final(run.report)}")
 
 
 @main.command()
@@ -769,11 +791,18 @@ def parametric(inputs, out_dir, services, decorrelation, confidence, **inputs_op
 @_draws_figures
 def demo(out_dir, days, seed) -> None:
     """Analyse the embedded real WAAS day (USLO, 2006-12-27) and a simulated campaign."""
+    with _staged(out_dir, "demo") as stage:
+        real, simulated, index = _demo(stage.path, days, seed)
+    click.echo(f"report: {stage.final(real[1])}")
+    click.echo(f"report: {stage.final(simulated[1])}")
+    click.echo(f"index:  {stage.final(index)}")
+
+
+def _demo(out_dir: Path, days: float, seed: int):
     from overbound.io.geodesy import Reference
     from overbound.simulate import SimulationConfig, write_simulation
     from overbound.simulate import simulate as run
 
-    out_dir.mkdir(parents=True, exist_ok=True)
     with as_file(files("overbound.data") / DEMO_POS) as pos:
         real = _run_analysis(
             [pos],
@@ -794,9 +823,7 @@ def demo(out_dir, days, seed) -> None:
         out_dir,
         [("USLO real WAAS day", real[1], real[2]), (f"Simulated {days:g} days", simulated[1], simulated[2])],
     )
-    click.echo(f"report: {real[1]}")
-    click.echo(f"report: {simulated[1]}")
-    click.echo(f"index:  {index}")
+    return real, simulated, index
 
 
 def _write_index(out_dir: Path, reports: list) -> Path:
@@ -985,7 +1012,7 @@ def sbas(
     keep_freed_memory()  # the engine's column arrays: reuse freed memory instead of faulting in fresh pages
     ref = _sbas_reference(reference, reference_ecef)
     options = SbasOptions(mode=mode, mask_deg=mask_deg, geo=geo)
-    with _progress() as bar:
+    with staged_files(out) as staged, _progress() as bar:
         task = bar.add_task("reading", total=None)
 
         def step(what: str) -> None:
@@ -997,9 +1024,13 @@ def sbas(
         subsets = subsets_product(run, levels, progress=step) if all_subsets else None
         ranges = range_product(run, list(sp3), progress=step) if sp3 else None
         step(f"writing {out}")
-        epochs_path, sats_path = write_run(run, out)
-        subsets_paths = write_subsets(subsets, run, out) if subsets else None
-        range_path = write_range(ranges, run, out) if ranges else None
+        epochs_path, sats_path = write_run(run, staged)
+        subsets_paths = write_subsets(subsets, run, staged) if subsets else None
+        range_path = write_range(ranges, run, staged) if ranges else None
+    # the paths where the files are now (renamed out of the staging directory)
+    epochs_path, sats_path = out.parent / epochs_path.name, out.parent / sats_path.name
+    subsets_paths = tuple(out.parent / p.name for p in subsets_paths) if subsets_paths else None
+    range_path = out.parent / range_path.name if range_path else None
     console.print(_sbas_line(run, epochs_path), highlight=False, soft_wrap=True)
     if subsets_paths:
         console.print(_subsets_line(subsets, subsets_paths[0]), highlight=False, soft_wrap=True)

@@ -124,6 +124,15 @@ class ReadReport:
     def n_rejected(self) -> int:
         return sum(self.rejected.values())
 
+    @property
+    def unaccounted(self) -> int:
+        """Rows neither kept nor counted as rejected: ``rows_read - rows_kept - n_rejected``.
+
+        Every reader keeps this at 0 (invalidated rows are kept, as no-solution rows), so
+        that nothing read is lost without a count.
+        """
+        return self.rows_read - self.rows_kept - self.n_rejected
+
     def to_dict(self) -> dict:
         return {
             "source": self.source,

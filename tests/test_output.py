@@ -1,0 +1,214 @@
+"""Output directories written whole or not at all (overbound.output), and the commands that use them."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from importlib.resources import files
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+
+from overbound.cli import DEMO_POS, USLO_REFERENCE, main
+from overbound.output import MANIFEST, OutputError, staged_directory, staged_files
+
+POS = Path(str(files("overbound.data") / DEMO_POS))
+
+
+def _tree(root: Path) -> dict[str, str]:
+    """Relative path -> SHA-256 of every file under ``root``."""
+    return {
+        p.relative_to(root).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(root.rglob("*"))
+        if p.is_file()
+    }
+
+
+def _leftovers(target: Path) -> list[str]:
+    return sorted(p.name for p in target.parent.glob(f".{target.name}.*"))
+
+
+def test_new_directory_appears_whole_with_its_manifest(tmp_path: Path) -> None:
+    target = tmp_path / "deep" / "out"
+    with staged_directory(target, command="analyze") as stage:
+        (stage.path / "summary.json").write_text("{}")
+        (stage.path / "sub").mkdir()
+        (stage.path / "sub" / "report.html").write_text("<p>")
+        assert not target.exists(), "nothing is visible before the commit"
+    assert stage.final(stage.path / "sub" / "report.html") == target / "sub" / "report.html"
+    manifest = json.loads((target / MANIFEST).read_text())
+    assert manifest["files"] == {"analyze": ["sub/report.html", "summary.json"]}
+    assert _leftovers(target) == []
+
+
+def test_stale_files_of_the_same_command_go_and_others_stay(tmp_path: Path) -> None:
+    target = tmp_path / "out"
+    with staged_directory(target, command="analyze") as stage:
+        (stage.path / "summary.json").write_text("old")
+        (stage.path / "evt-horizontal.json").write_text("old")
+    with staged_directory(target, command="evt") as stage:
+        (stage.path / "evt-vertical.json").write_text("evt")
+    (target / "notes.txt").write_text("mine")
+    with staged_directory(target, command="analyze") as stage:
+        (stage.path / "summary.json").write_text("new")
+    assert stage.removed == ["evt-horizontal.json"]
+    assert stage.kept == ["evt-vertical.json", "notes.txt"]
+    assert {p.name for p in target.iterdir()} == {"summary.json", "evt-vertical.json", "notes.txt", MANIFEST}
+    assert (target / "summary.json").read_text() == "new" and (target / "notes.txt").read_text() == "mine"
+    manifest = json.loads((target / MANIFEST).read_text())["files"]
+    assert manifest == {"analyze": ["summary.json"], "evt": ["evt-vertical.json"]}
+
+
+def test_a_failing_run_leaves_the_old_set_untouched(tmp_path: Path) -> None:
+    target = tmp_path / "out"
+    with staged_directory(target, command="analyze") as stage:
+        (stage.path / "summary.json").write_text("old")
+    before = _tree(target)
+    with pytest.raises(RuntimeError), staged_directory(target, command="analyze") as stage:
+        (stage.path / "summary.json").write_text("half")
+        raise RuntimeError("analysis failed")
+    assert _tree(target) == before
+    assert _leftovers(target) == []
+
+
+def test_a_second_run_on_a_directory_in_use_stops(tmp_path: Path) -> None:
+    target = tmp_path / "out"
+    with staged_directory(target, command="analyze"):
+        with pytest.raises(OutputError, match="in use by another overbound run"):
+            with staged_directory(target, command="analyze"):
+                pass
+        with pytest.raises(OutputError, match="in use"):
+            with staged_files(tmp_path / "out"):
+                pass
+
+
+def test_leftovers_of_a_killed_run_are_removed(tmp_path: Path) -> None:
+    target = tmp_path / "out"
+    (tmp_path / ".out.staging-99999").mkdir()
+    (tmp_path / ".out.staging-99999" / "summary.json").write_text("half")
+    with staged_directory(target, command="analyze") as stage:
+        (stage.path / "summary.json").write_text("new")
+    assert _leftovers(target) == []
+
+
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda d: (d / "file").write_text("x") and d / "file" / "out", "is a file"),
+        (lambda d: (d / "out").write_text("x") and d / "out", "is a file"),
+        (lambda d: d / ("x" * 300), "cannot"),
+    ],
+    ids=["parent-is-a-file", "target-is-a-file", "name-too-long"],
+)
+def test_unwritable_targets_fail_before_any_work(tmp_path: Path, make, message: str) -> None:
+    target = make(tmp_path)
+    with pytest.raises(OutputError, match=message) as err:
+        with staged_directory(target, command="analyze"):
+            pytest.fail("the body must not run")
+    assert "\n" not in str(err.value) and str(tmp_path) in str(err.value)
+
+
+def test_current_directory_is_refused(tmp_path: Path, monkeypatch) -> None:
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(OutputError, match="current directory"):
+        with staged_directory(".", command="analyze"):
+            pass
+
+
+def test_staged_files_move_the_set_into_place(tmp_path: Path) -> None:
+    target = tmp_path / "run.parquet"
+    target.write_text("old")
+    with staged_files(target) as path:
+        assert path.name == "run.parquet" and path.parent != tmp_path
+        path.write_text("new")
+        path.with_name("run.sats.parquet").write_text("sats")
+        assert target.read_text() == "old"
+    assert target.read_text() == "new" and (tmp_path / "run.sats.parquet").read_text() == "sats"
+    assert _leftovers(target) == []
+
+
+def test_analyze_checks_the_output_before_reading(tmp_path: Path, monkeypatch) -> None:
+    import overbound.analysis
+
+    def never(*args, **kwargs):
+        raise AssertionError("the analysis ran before the output was checked")
+
+    monkeypatch.setattr(overbound.analysis, "analyze", never)
+    (tmp_path / "file").write_text("x")
+    for out in (tmp_path / "file" / "out", tmp_path / ("y" * 300)):
+        res = CliRunner().invoke(main, ["analyze", str(POS), "--reference", USLO_REFERENCE, "-o", str(out)])
+        assert res.exit_code == 2, res.output
+        assert res.output.startswith("error: ") and res.output.count("\n") == 1, res.output
+    res = CliRunner().invoke(
+        main,
+        [
+            "analyze",
+            str(POS),
+            "--reference",
+            USLO_REFERENCE,
+            "-o",
+            str(tmp_path / "o"),
+            "--epochs",
+            str(tmp_path),
+        ],
+    )
+    assert res.exit_code == 2 and "is a directory" in res.output, res.output
+
+
+def _analyze(out: Path, *extra: str) -> subprocess.Popen:
+    cmd = [
+        sys.executable,
+        "-m",
+        "overbound",
+        "analyze",
+        str(POS),
+        "--reference",
+        USLO_REFERENCE,
+        "-o",
+        str(out),
+    ]
+    env = {**os.environ, "OVERBOUND_FIGURE_PROCESSES": "1"}
+    return subprocess.Popen([*cmd, *extra], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+@pytest.mark.slow
+def test_killing_analyze_leaves_the_old_or_the_new_set(tmp_path: Path) -> None:
+    """SIGKILL at spread moments of a run (including its last tenth), and one SIGTERM: the
+    directory always holds exactly the previous run's files or exactly the new run's."""
+    out = tmp_path / "out"
+    # old set: counting only; new set: every method (more files, other bytes)
+    assert _analyze(out, "--no-confidence", "--no-evt", "--no-parametric").wait() == 0
+    old = _tree(out)
+    saved = tmp_path / "saved-old"
+    shutil.copytree(out, saved)
+    start = time.monotonic()
+    assert _analyze(out).wait() == 0
+    duration = time.monotonic() - start
+    new = _tree(out)
+    assert set(new) > set(old) and new["summary.json"] != old["summary.json"]
+    seen = set()
+    for share, sig in [
+        (0.3, signal.SIGKILL),
+        (0.9, signal.SIGKILL),
+        (1.0, signal.SIGKILL),
+        (0.6, signal.SIGTERM),
+    ]:
+        shutil.rmtree(out)
+        shutil.copytree(saved, out)
+        proc = _analyze(out)
+        time.sleep(share * duration)
+        proc.send_signal(sig)
+        proc.wait()
+        state = _tree(out)
+        assert state in (old, new), f"kill at {share:.0%}: a mixed set {sorted(state)}"
+        seen.add("new" if state == new else "old")
+        if sig == signal.SIGTERM:
+            assert _leftovers(out) == [], "a terminated run cleans up its staging directory"
+    assert "old" in seen
