@@ -212,3 +212,28 @@ def test_killing_analyze_leaves_the_old_or_the_new_set(tmp_path: Path) -> None:
         if sig == signal.SIGTERM:
             assert _leftovers(out) == [], "a terminated run cleans up its staging directory"
     assert "old" in seen
+
+
+@pytest.mark.slow
+def test_outputs_are_byte_identical_whatever_the_threads_and_folder(tmp_path: Path) -> None:
+    """Issue 13: OPENBLAS_NUM_THREADS=1 vs 2 changed the last digits of parametric.json (BLAS
+    splits a long dot product across its threads). Same input, other folder, other thread
+    counts of BLAS, OpenMP and polars: every file of the output is the same bytes."""
+    from overbound.simulate import SimulationConfig, simulate, write_simulation
+
+    trees = []
+    for threads, folder in (("1", "a"), ("2", "b")):
+        work = tmp_path / folder
+        work.mkdir()
+        write_simulation(simulate(SimulationConfig(days=0.5, seed=3)), work / "campaign.parquet")
+        env = {
+            **os.environ,
+            "OVERBOUND_FIGURE_PROCESSES": "1",
+            **{k: threads for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")},
+            "POLARS_MAX_THREADS": threads,
+        }
+        cmd = [sys.executable, "-m", "overbound", "analyze", "campaign.parquet", "--no-evt", "-o", "out"]
+        subprocess.run(cmd, cwd=work, env=env, check=True, capture_output=True)
+        trees.append(_tree(work / "out"))
+    assert set(trees[0]) >= {"summary.json", "report.html", "parametric.json", "confidence-vertical.json"}
+    assert trees[0] == trees[1], [k for k in trees[0] if trees[0][k] != trees[1].get(k)]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime as dt
+import traceback
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,6 +44,10 @@ class Analysis:
         tail values): no estimate there, and why.
     parametric : the parametric availability, integrity and continuity analysis (Kannemans 2006) of
         both axes, ``None`` when not run (an axis it could not analyse carries its reason).
+    method_failures : ``(method, axis, reason)`` of each PL confidence-level axis
+        (``"confidence"``) or parametric analysis (``"parametric"``, axis ``"both"``) whose
+        numerical steps could not run on this input: the analysis goes on without it, and the
+        report and JSON say which stage failed and why.
     evidence : the counted evidence of the verdicts (:func:`~overbound.methods.evidence.counted_evidence`):
         counts with exact bounds that account for the dependence between epochs, and the
         safety-index tail counts the models are checked against.
@@ -58,6 +63,7 @@ class Analysis:
     evt_failures: tuple[tuple[str, str], ...] = ()
     parametric: ParametricAnalysis | None = None
     evidence: Evidence | None = None
+    method_failures: tuple[tuple[str, str, str], ...] = ()
 
     @property
     def n_rejected(self) -> int:
@@ -179,7 +185,10 @@ def analyze(
     axes = _confidence_axes(table) if confidence is None else tuple(confidence)
     if axes and progress:
         progress("PL confidence level")
-    cl = tuple(confidence_analysis(table, axis=a) for a in axes)
+    failures: list[tuple[str, str, str]] = []
+    cl = tuple(
+        c for a in axes if (c := _guarded(failures, "confidence", a, confidence_analysis, table, axis=a))
+    )
     evt_axes = _evt_axes(table) if evt is None else tuple(dict.fromkeys(evt))
     done, failed = _run_evt(table, evt_axes, levels, evt_n_boot, evt_seed, progress)
     par = None
@@ -188,8 +197,29 @@ def analyze(
 
         if progress:
             progress("parametric analysis")
-        par = parametric_analysis(table, services=levels)
-    return Analysis(table, reports, levels, counting, label, cl, done, failed, par, evidence)
+        par = _guarded(failures, "parametric", "both", parametric_analysis, table, services=levels)
+    return Analysis(table, reports, levels, counting, label, cl, done, failed, par, evidence, tuple(failures))
+
+
+#: What a numerical step raises when it cannot run on an input (a root-finder meeting NaN,
+#: a singular matrix, an overflow): the method is reported as failed, the analysis goes on.
+_NUMERICAL_FAILURES = (ValueError, ArithmeticError, RuntimeError, np.linalg.LinAlgError)
+
+
+_PACKAGE = str(Path(__file__).parent)
+
+
+def _guarded(failures: list, method: str, axis: str, run: Callable, /, *args, **kwargs):
+    """``run(*args, **kwargs)``, or ``None`` with ``(method, axis, reason)`` added to ``failures``."""
+    try:
+        return run(*args, **kwargs)
+    except _NUMERICAL_FAILURES as exc:
+        # the stage: the innermost frame of our own code (not scipy's or numpy's)
+        ours = [f for f in traceback.extract_tb(exc.__traceback__) if f.filename.startswith(_PACKAGE)]
+        where = (ours or traceback.extract_tb(exc.__traceback__))[-1]
+        stage = f"{Path(where.filename).stem}.{where.name}"
+        failures.append((method, axis, f"{type(exc).__name__} in {stage}: {exc}"))
+        return None
 
 
 def _confidence_axes(table: pl.DataFrame) -> tuple[str, ...]:

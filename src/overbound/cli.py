@@ -349,6 +349,8 @@ def _print_summary(result, assessment) -> None:
     console.print(t)
     for axis, reason in result.evt_failures:
         console.print(f"EVT {axis}: no estimate: {reason}", highlight=False, soft_wrap=True)
+    for method, axis, reason in result.method_failures:
+        console.print(f"{method} {axis}: not computed: {reason}", highlight=False, soft_wrap=True)
     if result.parametric is not None:
         for axis, reason in result.parametric.reasons.items():
             console.print(f"parametric {axis}: no estimate: {reason}", highlight=False, soft_wrap=True)

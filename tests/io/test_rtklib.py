@@ -17,7 +17,7 @@ import wgs84
 from polars.testing import assert_frame_equal
 
 from overbound.io.geodesy import Reference
-from overbound.io.gpstime import GPS_UTC_LEAP_SECONDS, gps_utc_offset, utc_to_gpst
+from overbound.io.gpstime import GPS_UTC_LEAP_SECONDS, PLAUSIBLE_SPAN, gps_utc_offset, utc_to_gpst
 from overbound.io.rtklib import SOLUTION_QUALITY, parse_pos_header, read_rtklib_pos
 from overbound.io.schema import InputError
 
@@ -153,17 +153,23 @@ EXPECTED: dict[str, tuple] = {
         {},
         "20: duplicate time: 2006-12-27 00:06:00 repeats line 19",
     ),
+    "cut-inside-vpl.pos": (
+        7,
+        {"truncated_line": 1},
+        {},
+        "23: truncated line: the last line has no line end and is shorter than the one before",
+    ),
     "year-0000.pos": (
         7,
         {"malformed_line": 1},
         {},
-        "18: malformed line: time '0000/12/27 00:05:30.000' outside 1980-01-06 to 2099 (GPS)",
+        "18: malformed line: time '0000/12/27 00:05:30.000' outside " + PLAUSIBLE_SPAN,
     ),
     "year-9999.pos": (
         7,
         {"malformed_line": 1},
         {},
-        "20: malformed line: time '9999/12/27 00:06:30.000' outside 1980-01-06 to 2099 (GPS)",
+        "20: malformed line: time '9999/12/27 00:06:30.000' outside " + PLAUSIBLE_SPAN,
     ),
     "negative-hpl.pos": (8, {}, {"negative_pl": 1}, "19: negative_pl: solution set to no-solution"),
     "nan-vpl.pos": (8, {}, {"nan_pl": 1}, "20: nan_pl: solution set to no-solution"),

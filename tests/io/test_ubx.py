@@ -77,7 +77,8 @@ def test_hand_read_first_epoch():
     assert row["east"] == pytest.approx(0.5, abs=0.006) and row["north"] == pytest.approx(-0.3, abs=0.006)
     assert (row["station"], row["nsv"], row["mode"], row["alert"]) == ("pvt_pl_timegps", 9, "3D/DGNSS", False)
     assert df["nsv"].to_list() == [9 + k % 3 for k in range(10)]
-    assert rep.rows_read == 30 and rep.rejected == {} and rep.invalidated == {}
+    assert rep.rows_read == 10 and rep.rejected == {} and rep.invalidated == {}  # the 10 NAV-PL epochs
+    assert "NAV-PL 10, NAV-PVT 10, NAV-TIMEGPS 10" in rep.notes[0]
     assert "frames: NAV-PL 10, NAV-PVT 10, NAV-TIMEGPS 10; 78 bytes outside UBX frames skipped" in rep.notes
 
 

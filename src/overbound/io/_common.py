@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import polars as pl
 
+from overbound.io.gpstime import GPS_EPOCH, PLAUSIBLE_END, PLAUSIBLE_SPAN
 from overbound.io.schema import COLUMNS, InputError, ReadReport, as_numpy
 
 _DTYPES = {c.name: c.dtype for c in COLUMNS}
@@ -24,6 +25,10 @@ class RowLog:
     rejected: Counter = field(default_factory=Counter)
     first_bad: str = ""
     first_line: int = 0
+
+    @property
+    def n_rejected(self) -> int:
+        return sum(self.rejected.values())
 
     def reject(self, line: int, reason: str) -> None:
         """Count one rejected row; with ``strict`` raise instead."""
@@ -56,17 +61,22 @@ def finalize_epochs(
 
     Rules, in order:
 
+    0. A row whose time is missing or outside the GNSS era
+       (:data:`~overbound.io.gpstime.PLAUSIBLE_SPAN`) is rejected and counted as
+       ``time_out_of_range``: a corrupted year must neither reach the analysis nor break
+       the order check.
     1. A time earlier than the previous row of the same station raises
        :class:`InputError` naming the line: the file order is broken and no row-wise
        repair is defensible.
     2. A row whose time equals the previous row's (same station) is rejected and
        counted as ``duplicate_time``; the first occurrence is kept.
-    3. A NaN or negative protection level, or a NaN error beside a finite PL, makes the
-       epoch a no-solution epoch (all errors and PLs NaN), counted under
+    3. A NaN, infinite or negative protection level, or a NaN or infinite error beside a
+       finite PL, makes the epoch a no-solution epoch (all errors and PLs NaN), counted under
        ``invalidated`` as ``nan_pl``, ``negative_pl`` or ``nan_error``.
        Rows whose errors *and* PLs are all NaN are no-solution epochs already and are
        not counted.
     """
+    df = _drop_implausible_times(df, log)
     df = _drop_duplicates_or_raise(df, log)
     df, invalid = _invalidate(df, log)
     cols = [c.name for c in COLUMNS if c.name in df.columns]
@@ -82,6 +92,18 @@ def finalize_epochs(
         notes=notes,
     )
     return out, report
+
+
+def _drop_implausible_times(df: pl.DataFrame, log: RowLog) -> pl.DataFrame:
+    t = pl.col("time").cast(pl.Datetime("us"))
+    bad = t.is_null() | (t < GPS_EPOCH) | (t >= PLAUSIBLE_END)
+    out = df.filter(bad).select("_line", "time")
+    if not out.height:
+        return df
+    line, time = out.row(0)
+    log.reject(line, f"time out of range: {time} outside {PLAUSIBLE_SPAN}")
+    log.rejected["time_out_of_range"] += out.height - 1
+    return df.filter(~bad)
 
 
 def _drop_duplicates_or_raise(df: pl.DataFrame, log: RowLog) -> pl.DataFrame:
@@ -115,8 +137,9 @@ def _drop_duplicates_or_raise(df: pl.DataFrame, log: RowLog) -> pl.DataFrame:
 
 
 def _invalidate(df: pl.DataFrame, log: RowLog) -> tuple[pl.DataFrame, dict[str, int]]:
-    missing = [pl.col(c).is_nan().fill_null(True) for c in ("hpl", "vpl", "hpe", "vpe")]
-    all_nan = pl.all_horizontal(missing)
+    # An infinite value is no measurement either (an infinite error beside a finite PL would be an HMI).
+    missing = [(~pl.col(c).is_finite()).fill_null(True) for c in ("hpl", "vpl", "hpe", "vpe")]
+    all_nan = pl.all_horizontal([pl.col(c).is_nan().fill_null(True) for c in ("hpl", "vpl", "hpe", "vpe")])
     neg = pl.any_horizontal([(pl.col(c) < 0).fill_null(False) for c in ("hpl", "vpl")])
     nan_pl = pl.any_horizontal(missing[:2])
     nan_err = pl.any_horizontal(missing[2:])

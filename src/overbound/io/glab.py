@@ -25,6 +25,7 @@ import polars as pl
 
 from overbound.io._common import RowLog, finalize_epochs
 from overbound.io.geodesy import Reference, enu_errors_ecef
+from overbound.io.gpstime import PLAUSIBLE_SPAN, PLAUSIBLE_YEARS
 from overbound.io.open import open_text, source_name
 from overbound.io.schema import InputError, ReadReport
 
@@ -139,6 +140,17 @@ _NOSOL = re.compile(
     r"|.*\. Skipping epoch)\s*$"
 )
 _NOSOL_MATRIX = re.compile(rf"^INFO Skipping epoch {_TSTAMP} due to (?P<why>.*?)\s*$")
+#: Pieces of the final no-solution messages, two per message and disjoint: a line holding
+#: any of them is a no-solution line, and one that does not then parse (e.g. one character
+#: changed) is a rejected row, not a silently lost epoch.
+_NOSOL_ANCHORS = (
+    "Not enough",
+    "to compute solution",
+    "satellites available",
+    "for computing solution",
+    "Skipping epoch",
+    " due to ",
+)
 _APRIORI = re.compile(
     r"^INFO PREPROCESSING Receiver a priori position(?: \(metres\))?:"
     r"(?:\s+(-?\d+\.\d*)\s+(-?\d+\.\d*)\s+(-?\d+\.\d*))?\s*\[(?P<tag>[^\]]*)\]?"
@@ -249,8 +261,7 @@ def read_glab(
     info = numbered.filter(pl.col("text").str.starts_with("INFO"))
 
     solved, layouts = _parse_sbasout(sbasout, log)
-    nosol, reasons = _no_solution_rows(info)
-    log.rows_read += nosol.height
+    nosol, reasons = _no_solution_rows(info, log)
     notes = _header_notes(info, layouts)
     apriori = _apriori(info)
 
@@ -370,10 +381,25 @@ def _check_rows(conv: pl.DataFrame, lay: SbasoutLayout, log: RowLog) -> pl.DataF
     badmode = ~pl.col("mode").is_in(["PA", "NPA"])
     badlist = pl.col("n") != lay.fixed + pl.col("nview")
     badcount = (pl.col("nused") > pl.col("nview")) | (pl.col("nused") < 0)
-    flagged = conv.with_columns((short | nonnum | badmode | badlist | badcount).fill_null(True).alias("_bad"))
+    flagged = conv.with_columns(
+        (short | nonnum | badmode | badlist | badcount | ~_time_fields_ok()).fill_null(True).alias("_bad")
+    )
     for row in flagged.filter(pl.col("_bad")).iter_rows(named=True):
         log.reject(row["_line"], _why(row, lay))
     return flagged.filter(~pl.col("_bad")).drop("_bad", "tok")
+
+
+def _time_fields_ok() -> pl.Expr:
+    """Year in the GNSS era, day of year, second of day and of week in range, week plausible:
+    a NaN or corrupted time field is a rejected line, not an error of the time arithmetic."""
+    years = PLAUSIBLE_YEARS
+    return (
+        pl.col("year").is_between(years.start, years.stop - 1)
+        & pl.col("doy").is_between(1, 366)
+        & pl.col("sod").is_between(0.0, 86401.0, closed="left")
+        & pl.col("tow").is_between(0.0, float(_WEEK_S + 1), closed="left")
+        & pl.col("week").is_between(0, (years.stop - 1980) * 53)
+    )
 
 
 def _why(row: dict, lay: SbasoutLayout) -> str:
@@ -386,20 +412,30 @@ def _why(row: dict, lay: SbasoutLayout) -> str:
         return f"unknown mode: field {lay.fields['mode']} is {row['mode']!r}, expected PA or NPA"
     if row["nused"] > row["nview"] or row["nused"] < 0:
         return f"bad satellite count: {row['nused']} used of {row['nview']} in view"
+    if row["n"] == lay.fixed + row["nview"]:
+        return (
+            f"time out of range: year {row['year']}, day {row['doy']}, second {row['sod']}, "
+            f"week {row['week']}, time of week {row['tow']} (expected {PLAUSIBLE_SPAN})"
+        )
     return (
         f"truncated line: field {lay.fields['nview']} says {row['nview']} satellites in view, "
         f"the list has {row['n'] - lay.fixed}"
     )
 
 
-def _no_solution_rows(info: pl.DataFrame) -> tuple[pl.DataFrame, Counter]:
-    """Epochs gLAB gave up on, from its timestamped INFO lines."""
+def _no_solution_rows(info: pl.DataFrame, log: RowLog) -> tuple[pl.DataFrame, Counter]:
+    """Epochs gLAB gave up on, from its timestamped INFO lines; each one is a row read, and
+    one that does not parse (or whose time is out of range) is rejected as a malformed line."""
     rows: list[tuple[int, int, int, float, str]] = []
+    anchors = pl.any_horizontal([pl.col("text").str.contains(a, literal=True) for a in _NOSOL_ANCHORS])
     # INFO lines are few (one per skipped epoch plus the header); a regex per line is clear here.
-    for line, text in info.filter(pl.col("text").str.contains("kipping epoch|satellites")).iter_rows():
+    for line, text in info.filter(anchors).iter_rows():
+        log.rows_read += 1
         m = _NOSOL.match(text) or _NOSOL_MATRIX.match(text)
-        if m:
+        if m and _plausible_day(int(m.group(1)), int(m.group(2)), float(m.group(3))):
             rows.append((line, int(m.group(1)), int(m.group(2)), float(m.group(3)), _reason(m.group("why"))))
+        else:
+            log.reject(line, f"malformed line: no-solution INFO line that does not parse: {text[:60]!r}")
     df = pl.DataFrame(
         rows,
         schema={"_line": pl.Int64, "year": pl.Int64, "doy": pl.Int64, "sod": pl.Float64, "why": pl.String},
@@ -420,6 +456,12 @@ def _no_solution_rows(info: pl.DataFrame) -> tuple[pl.DataFrame, Counter]:
         pl.lit(True).alias("alert"),
     )
     return out, reasons
+
+
+def _plausible_day(year: int, doy: int, sod: float) -> bool:
+    """A GNSS-era date (:data:`~overbound.io.gpstime.PLAUSIBLE_YEARS`) with a day of year and a
+    second of day in range."""
+    return year in PLAUSIBLE_YEARS and 1 <= doy <= 366 and 0 <= sod < 86401
 
 
 def _reason(why: str) -> str:

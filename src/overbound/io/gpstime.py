@@ -7,11 +7,29 @@ import datetime as dt
 import numpy as np
 import polars as pl
 
-__all__ = ["GPS_EPOCH", "GPS_UTC_LEAP_SECONDS", "gps_utc_offset", "leap_seconds", "utc_to_gpst"]
+__all__ = [
+    "GPS_EPOCH",
+    "GPS_UTC_LEAP_SECONDS",
+    "PLAUSIBLE_END",
+    "PLAUSIBLE_SPAN",
+    "PLAUSIBLE_YEARS",
+    "gps_utc_offset",
+    "leap_seconds",
+    "utc_to_gpst",
+]
 
 #: Origin of GPS time, 1980-01-06 00:00:00 (UTC = GPST then).
 GPS_EPOCH = dt.datetime(1980, 1, 6)
 _US = 1_000_000
+#: End (exclusive) of the times a GNSS record can carry: the present plus a margin, to the end
+#: of next year. Readers reject a time outside ``GPS_EPOCH <= t < PLAUSIBLE_END`` as a counted
+#: malformed row: a corrupted year (0000, 9999) must not reach the analysis, whose tables span
+#: the campaign's time range.
+PLAUSIBLE_END = dt.datetime(dt.date.today().year + 2, 1, 1)
+#: The years of :data:`GPS_EPOCH` to :data:`PLAUSIBLE_END` (for readers that parse a year field).
+PLAUSIBLE_YEARS = range(GPS_EPOCH.year, PLAUSIBLE_END.year)
+#: The span as rejection messages print it.
+PLAUSIBLE_SPAN = f"1980-01-06 to {PLAUSIBLE_END.year - 1}-12-31 (GPS)"
 
 #: GPS-UTC in seconds, in force from 00:00 UTC of each date on. Source: IERS Bulletin C
 #: (TAI-UTC, https://hpiers.obspm.fr/eoppc/bul/bulc/) minus TAI-GPS = 19 s. Bulletin C 69

@@ -11,6 +11,7 @@ import datetime as dt
 import gzip
 import io
 import re
+import zlib
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import BinaryIO, TextIO
@@ -55,8 +56,35 @@ def open_binary(source: Source) -> BinaryIO:
     head = raw.read(2)
     raw.seek(0)
     if head == _GZIP:
-        return gzip.GzipFile(fileobj=raw)  # type: ignore[return-value]
+        return _CheckedGzip(source_name(source), raw)  # type: ignore[return-value]
     return raw
+
+
+class _CheckedGzip(gzip.GzipFile):
+    """A gzip stream whose corruption (bad header, CRC, truncation) is one :class:`InputError`
+    naming the file, whichever way the reader reads it."""
+
+    def __init__(self, name: str, raw: BinaryIO):
+        super().__init__(fileobj=raw, mode="rb")
+        self._source = name
+
+    def _checked(method):
+        def call(self, *args):
+            try:
+                return method(self, *args)
+            except (EOFError, gzip.BadGzipFile, zlib.error) as exc:
+                why = str(exc) or type(exc).__name__
+                raise InputError(self._source, f"truncated or corrupt gzip stream ({why})") from None
+
+        return call
+
+    read = _checked(gzip.GzipFile.read)
+    read1 = _checked(gzip.GzipFile.read1)
+    readline = _checked(gzip.GzipFile.readline)
+    readinto = _checked(gzip.GzipFile.readinto)
+    readinto1 = _checked(gzip.GzipFile.readinto1)
+    peek = _checked(gzip.GzipFile.peek)
+    seek = _checked(gzip.GzipFile.seek)
 
 
 def open_text(source: Source) -> TextIO:

@@ -32,7 +32,7 @@ import polars as pl
 
 from overbound.io._common import RowLog, finalize_epochs
 from overbound.io.geodesy import Reference, enu_errors_ecef, enu_errors_geodetic
-from overbound.io.gpstime import leap_seconds, utc_to_gpst
+from overbound.io.gpstime import PLAUSIBLE_END, PLAUSIBLE_SPAN, leap_seconds, utc_to_gpst
 from overbound.io.open import Source, open_text, source_name
 from overbound.io.schema import InputError, ReadReport
 
@@ -55,7 +55,7 @@ _WEEK_S = 604_800
 _US = 1_000_000
 #: Epochs outside [GPS epoch, 2100) are rejected as malformed: a corrupted year (0000, 9999) would
 #: otherwise span millennia and make the 1 Hz grids of the analysis allocate gigabytes (issue 13).
-_ERA_US = (_GPS_EPOCH_UNIX_S * _US, 4_102_444_800 * _US)  # 1980-01-06, 2100-01-01
+_ERA_US = (_GPS_EPOCH_UNIX_S * _US, int(PLAUSIBLE_END.replace(tzinfo=dt.UTC).timestamp()) * _US)
 _JST_UTC_S = 9 * 3600  # JST = UTC + 9 h (RTKLIB TIMES_JST)
 _TIME_SYSTEMS = ("GPST", "UTC", "JST")
 _SEPARATORS = (",", ";", "|")  # non-blank field separators we undo (RTKLIB out-fieldsep)
@@ -195,6 +195,10 @@ def read_rtklib_pos(
     if reference is None:
         raise InputError(name, _NEEDS_REFERENCE)
     log.rows_read = raw.height
+    cut = _cut_last_line(text, raw)
+    if cut:
+        log.reject(cut, "truncated line: the last line has no line end and is shorter than the one before")
+        raw = raw.filter(pl.col("_line") != cut)
 
     parsed = _parse_fields(raw, header)
     for line, reason in parsed.filter(pl.col("_bad").is_not_null()).select("_line", "_bad").iter_rows():
@@ -349,6 +353,19 @@ def _station(header: PosHeader, station: str | None, name: str) -> tuple[str, st
     return stem, "the file name"
 
 
+def _cut_last_line(text: str, raw: pl.DataFrame) -> int:
+    """The line number of a last data line cut short by a truncated file, or 0.
+
+    RTKLIB writes every solution line with fixed field widths and a line end, so a last line
+    without its line end that is shorter than the data line before it was cut (``24.6``
+    read as ``24.``): a cut inside a number would otherwise parse as another value.
+    """
+    if text.endswith("\n") or raw.height < 2:
+        return 0
+    last, before = raw["_text"][-1], raw["_text"][-2]
+    return int(raw["_line"][-1]) if len(last) < len(before) else 0
+
+
 def _data_lines(lines: list[str], sep: str) -> pl.DataFrame:
     """Non-comment, non-blank lines with their 1-based line numbers, split into fields."""
     df = pl.DataFrame({"_text": lines}, schema={"_text": pl.String}).with_row_index("_line", offset=1)
@@ -431,7 +448,7 @@ def _parse_fields(raw: pl.DataFrame, header: PosHeader) -> pl.DataFrame:
     reason = reason.when(time.is_null()).then(pl.format("malformed line: bad time '{} {}'", tok(0), tok(1)))
     t_us = time.dt.epoch("us")
     reason = reason.when((t_us < _ERA_US[0]) | (t_us >= _ERA_US[1])).then(
-        pl.format("malformed line: time '{} {}' outside 1980-01-06 to 2099 (GPS)", tok(0), tok(1))
+        pl.format(f"malformed line: time '{{}} {{}}' outside {PLAUSIBLE_SPAN}", tok(0), tok(1))
     )
     for bad, why in checks:
         reason = reason.when(bad).then(why)

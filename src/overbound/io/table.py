@@ -115,11 +115,16 @@ def read_parquet(
         wanted = {mapping.get(c, c) for c in (*keep, *INPUT_COLUMNS)}
         used = [c for c in names if c in wanted]
         raw = pl.read_parquet(data, columns=used or None)
-    except Exception as exc:  # polars raises several types for a bad file
-        raise InputError(name, f"not a readable Parquet file ({type(exc).__name__}: {exc})") from None
+        prov = json.loads(meta) if meta else None
+        if meta and not isinstance(prov, dict):
+            raise ValueError(f"the {METADATA_KEY} metadata is not a JSON object")
+    # polars raises several types for a bad file, and a corrupt page can make its Rust code
+    # panic (PanicException is a BaseException): one line naming the file either way.
+    except (Exception, pl.exceptions.PanicException) as exc:
+        why = str(exc).strip().splitlines()[0][:200] if str(exc).strip() else ""
+        raise InputError(name, f"not a readable Parquet file ({type(exc).__name__}: {why})") from None
     notes = []
-    if meta:
-        prov = json.loads(meta)
+    if prov:
         version, src, fmt = prov.get("overbound_version"), prov.get("source"), prov.get("format")
         notes.append(f"written by overbound {version} from {src} ({fmt})")
     unread = [c for c in names if c not in used]

@@ -84,7 +84,8 @@ def read_ubx(
     (table, report) : the epoch table with ``east``, ``north``, ``nsv`` (NAV-PVT ``numSV``),
         ``mode`` (NAV-PVT ``fixType``, plus ``/DGNSS``, ``/RTK-float`` or ``/RTK-fixed``) and
         ``alert`` (PL invalid or no 3D fix), and its :class:`~overbound.io.schema.ReadReport`.
-        ``rows_read`` counts UBX frames (all classes, corrupt ones included).
+        ``rows_read`` counts the NAV-PL messages (the epochs) plus the frames rejected whole
+        (corrupt, truncated or undecodable, of any class); the notes count frames by class.
 
     Raises
     ------
@@ -155,10 +156,12 @@ def read_ubx(
     data = read_bytes(source)
     log = RowLog(name, strict=strict)
     frames, counts, skipped = _scan(data, log)
-    log.rows_read = sum(counts.values())
     decoded = _decode(frames, log)
     if not decoded["NAV-PL"]:
         raise InputError(name, _NO_PL)
+    # Rows are epochs (NAV-PL messages) plus the frames rejected whole (corrupt, truncated,
+    # undecodable), whatever their class: kept + rejected = read. Other frames are noted.
+    log.rows_read = len(decoded["NAV-PL"]) + log.n_rejected
     if reference is None:
         raise InputError(
             name, "UBX logs hold positions, not errors: pass reference= (the true antenna position)"

@@ -99,6 +99,7 @@ def section_ids(analysis: Analysis) -> tuple[str, ...]:
         *(("stations",) if analysis.counting.by_station else ()),
         *(_service_id(group[0]) for group in service_groups(analysis.services)),
         *(f"confidence-{c.axis}" for c in analysis.confidence),
+        *(f"{method}-{axis}" for method, axis, _ in analysis.method_failures),
         *(f"evt-{axis}" for axis, _ in _evt_items(analysis)),
         *(parametric_ids() if analysis.parametric is not None else ()),
         "time-series",
@@ -122,6 +123,7 @@ def render_report(
         *((_stations(analysis),) if c.by_station else ()),
         *(_service(analysis, group) for group in service_groups(analysis.services)),
         *(confidence_section_html(c) for c in analysis.confidence),
+        *(_failure_section(*failure) for failure in analysis.method_failures),
         *(_evt_section(analysis, axis, item) for axis, item in _evt_items(analysis)),
         *(
             (parametric_section_html(analysis.parametric, analysis.table, timeseries=False),)
@@ -232,6 +234,7 @@ def _header(a: Analysis) -> str:
             ("accuracy", "Accuracy"),
             *((_service_id(g[0]), " and ".join(s.name for s in g)) for g in service_groups(a.services)),
             *((f"confidence-{c.axis}", f"{c.axis.capitalize()} PL confidence") for c in a.confidence),
+            *((f"{m}-{axis}", f"{m.capitalize()} (failed)") for m, axis, _ in a.method_failures),
             *((f"evt-{axis}", f"{axis.capitalize()} EVT") for axis, _ in _evt_items(a)),
             *(
                 (sid, f"{sid.removeprefix('parametric-').capitalize()} parametric")
@@ -247,6 +250,23 @@ def _header(a: Analysis) -> str:
         f'<p class="sub">overbound {_e(__version__)} · verdicts for '
         f"{_e(', '.join(s.name for s in a.services))} · all times GPS time</p></header>"
         f'<nav class="sticky" aria-label="Contents"><ul>{links}</ul></nav>'
+    )
+
+
+_FAILED_METHOD = {
+    "confidence": "PL confidence level (Comby et al. 2003)",
+    "parametric": "Parametric availability, integrity and continuity (Kannemans 2006)",
+}
+
+
+def _failure_section(method: str, axis: str, reason: str) -> str:
+    """The section of a method that could not run on this input: which stage failed, and why."""
+    title = _FAILED_METHOD.get(method, method) + ("" if axis == "both" else f", {axis}")
+    return _section(
+        f"{method}-{axis}",
+        title,
+        f'<p class="alarm">Not computed: a numerical step failed on this input ({_e(reason)}). '
+        "The other sections do not depend on it; its evidence is missing from the verdicts.</p>",
     )
 
 

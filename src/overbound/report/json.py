@@ -199,9 +199,18 @@ def summary_dict(
         "safety_index": {a: dataclasses.asdict(c.safety[a]) for a in AXES},
         "services": services,
         "stations": {name: _station_dict(sc, analysis.services) for name, sc in c.by_station.items()},
-        "confidence": {a.axis: _confidence_brief(a) for a in analysis.confidence},
+        "confidence": {a.axis: _confidence_brief(a) for a in analysis.confidence}
+        | {
+            axis: {"failed": reason}
+            for method, axis, reason in analysis.method_failures
+            if method == "confidence"
+        },
         "evt": _evt_briefs(analysis),
         "parametric": _parametric_brief(analysis),
+        "method_failures": [
+            {"method": method, "axis": axis, "reason": reason}
+            for method, axis, reason in analysis.method_failures
+        ],
     }
 
 

@@ -73,6 +73,7 @@ from overbound.report.parametric_figures import (
 )
 from overbound.report.style import style
 from overbound.services import ServiceLevel
+from overbound.stats.sums import dot
 
 __all__ = [
     "JSON_NAME",
@@ -154,7 +155,7 @@ def analysed_series(table: pl.DataFrame, axis: AxisParametric) -> ParametricSeri
     if f.distribution == "normal":
         moments = (float(ratio.mean()), float(np.std(ratio, ddof=1)))
     else:
-        moments = (f.mean, math.sqrt(float(ratio @ ratio) / (2.0 * ratio.size)))
+        moments = (f.mean, math.sqrt(dot(ratio, ratio) / (2.0 * ratio.size)))
     if not np.allclose(moments, (f.mean, f.sigma), rtol=1e-9, atol=1e-15):
         return None
     t = as_numpy(table["time"]).astype(np.int64, copy=False)[ok]

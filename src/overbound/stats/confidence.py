@@ -29,6 +29,8 @@ import math
 import numpy as np
 from scipy import integrate, optimize, special, stats
 
+from overbound.stats.sums import dot, vecmat
+
 __all__ = [
     "AXES",
     "confidence_level",
@@ -384,9 +386,9 @@ def _halley(
     for _ in range(_MAXITER):
         p, d1, d2 = _exceedance_dw(pl, r, w, axis)
         q = 1.0 / (1.0 - p)
-        h = counts @ np.log1p(-p)
-        h1 = -(counts @ (d1 * q))
-        h2 = -(counts @ ((d2 + d1 * d1 * q) * q))
+        h = vecmat(counts, np.log1p(-p))
+        h1 = -vecmat(counts, d1 * q)
+        h2 = -vecmat(counts, (d2 + d1 * d1 * q) * q)
         with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
             psi = np.where(h < 0.0, np.log(-h) - log_target, -np.inf)
             psi1 = h1 / h
@@ -467,7 +469,7 @@ def _confidence(
         return 0.0
     w = _solve_w(levels, counts, r, risk, axis)
     f = _f_sigma(1.0 / w, n, sigma_hat)
-    return float(np.clip(weights @ f, 0.0, 1.0))
+    return float(np.clip(dot(weights, f), 0.0, 1.0))
 
 
 def confidence_level(
@@ -769,7 +771,7 @@ def confidence_level_bruteforce(
 
     def g(mu: float, s: np.ndarray | float) -> np.ndarray:
         p = _exceedance(pl_col, abs(mu), np.atleast_1d(s)[None, :], axis)
-        return -np.expm1(counts @ np.log1p(-p))
+        return -np.expm1(vecmat(counts, np.log1p(-p)))
 
     def inner(mu: float) -> float:
         inside = g(mu, s_grid) <= r_n

@@ -20,6 +20,7 @@ import numpy as np
 import scipy.stats
 
 from overbound.stats.dependence import SlotGrid, slot_grid  # the continuity count's grid rule
+from overbound.stats.sums import dot
 
 __all__ = [
     "ContinuityCurve",
@@ -492,5 +493,5 @@ def fit_loglinear(alert_limit: np.ndarray, risk: np.ndarray) -> LogLinearFit | N
     if x.size < 3 or np.ptp(x) == 0:
         return None
     xm = x.mean()
-    b = float(np.dot(x - xm, y - y.mean()) / np.dot(x - xm, x - xm))
+    b = dot(x - xm, y - y.mean()) / dot(x - xm, x - xm)
     return LogLinearFit(float(y.mean() - b * xm), b, float(x.min()), float(x.max()), int(x.size))

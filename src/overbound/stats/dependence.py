@@ -21,6 +21,8 @@ import polars as pl
 import scipy.fft
 import scipy.signal
 
+from overbound.stats.sums import dot
+
 __all__ = [
     "Clusters",
     "RegularSeries",
@@ -388,7 +390,7 @@ def autocorrelation(x: np.ndarray, *, max_lag: int) -> np.ndarray:
     if nv < 2:
         return out
     d = np.where(w, a - a[w].mean(), 0.0)
-    var = float(np.dot(d, d)) / nv
+    var = dot(d, d) / nv
     if not var > 0:
         return out
     n = a.size
@@ -887,10 +889,10 @@ def extremal_index(
     gaps = np.rint(np.diff(te) / interval_s)
     if gaps.max() > 2:
         g1 = gaps - 1.0
-        den = (n - 1) * float(np.dot(g1, gaps - 2.0))
+        den = (n - 1) * dot(g1, gaps - 2.0)
         num = 2.0 * float(g1.sum()) ** 2
     else:
-        den = (n - 1) * float(np.dot(gaps, gaps))
+        den = (n - 1) * dot(gaps, gaps)
         num = 2.0 * float(gaps.sum()) ** 2
     return float(min(1.0, num / den)) if den > 0 else 1.0
 

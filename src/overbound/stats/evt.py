@@ -20,6 +20,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import optimize, special, stats
 
+from overbound.stats.sums import matvec
+
 __all__ = [
     "GEVFit",
     "GPDFit",
@@ -832,8 +834,8 @@ def _gev_pwm_start_rows(y: np.ndarray) -> np.ndarray:
     n = y.shape[1]
     j = np.arange(n)
     b0 = ys.mean(axis=1)
-    b1 = ys @ j / (n * (n - 1))
-    b2 = ys @ (j * (j - 1)) / (n * (n - 1) * (n - 2))
+    b1 = matvec(ys, j.astype(float)) / (n * (n - 1))
+    b2 = matvec(ys, (j * (j - 1)).astype(float)) / (n * (n - 1) * (n - 2))
     with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
         c = (2 * b1 - b0) / (3 * b2 - b0) - math.log(2) / math.log(3)
         k = 7.8590 * c + 2.9554 * c * c  # Hosking's k = -xi

@@ -33,6 +33,8 @@ from typing import Literal
 import numpy as np
 from scipy import special, stats
 
+from overbound.stats.sums import dot
+
 __all__ = [
     "IntegrityProbabilities",
     "RatioFit",
@@ -193,7 +195,7 @@ def fit_rayleigh_ratio(r: np.ndarray) -> RatioFit:
     a = _sample(r, "r", 1)
     if (a < 0.0).any():
         raise ValueError("r must be >= 0 for a Rayleigh fit (HPE/HPL)")
-    s = math.sqrt(float(a @ a) / (2.0 * a.size))
+    s = math.sqrt(dot(a, a) / (2.0 * a.size))
     if not s > 0.0:
         raise ValueError("r is all zero: a Rayleigh fit needs a positive scale")
     return RatioFit("rayleigh", s * math.sqrt(math.pi / 2.0), s, int(a.size))
@@ -483,9 +485,9 @@ def _profile_moments(v: np.ndarray, b: float, buf: np.ndarray) -> tuple[float, f
     s0 = float(buf.sum())
     buf *= v
     m1 = float(buf.sum()) / s0
-    m2 = float(buf @ v) / s0
+    m2 = dot(buf, v) / s0
     buf *= v
-    m3 = float(buf @ v) / s0
+    m3 = dot(buf, v) / s0
     return s0, m1, m2, m3
 
 
@@ -676,9 +678,9 @@ def weibull_covariance(fit: WeibullFit, x: np.ndarray, n_effective: float) -> np
     np.exp(z, out=z)  # a x^b
     n = a_.size
     j11 = float(z.sum()) / n
-    j12 = float(z @ y) / n
+    j12 = dot(z, y) / n
     z *= y
-    j22 = 1.0 / fit.b**2 + float(z @ y) / n
+    j22 = 1.0 / fit.b**2 + dot(z, y) / n
     return np.linalg.inv(np.array([[j11, j12], [j12, j22]])) / ne
 
 

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special
 
+from overbound.stats.sums import dot
+
 __all__ = [
     "Bounds",
     "clopper_pearson",
@@ -138,7 +140,7 @@ def integrated_autocorrelation(
             return 1.0
         return max(1.0, b * integrated_autocorrelation(y, max_lag=max_lag) * vy / vx)
     d = x.astype(np.float64) - x.mean(dtype=np.float64)
-    var = float(np.dot(d, d))
+    var = dot(d, d)
     if var <= 0.0:
         return 1.0
     lag = min(n - 1, max(2, n // 4 if max_lag is None else int(max_lag)))

@@ -52,6 +52,11 @@ def main(src: Path) -> None:
     put("crlf-line-endings.pos", head + data, nl="\r\n")
     put("truncated-line.pos", head + data[:3] + [" ".join(data[3].split()[:11])] + data[4:])
     put("non-numeric-field.pos", head + sub(2, "134.4215", "13x.4215"))
+    put("year-0000.pos", head + sub(2, "2006/12/27", "0000/12/27"))
+    put("year-9999.pos", head + sub(4, "2006/12/27", "9999/12/27"))
+    # a file cut inside the last line's VPL: "24.6" became "24." and the line end is gone
+    cut = "\n".join(head + data)
+    (HERE / "cut-inside-vpl.pos").write_bytes(cut[: cut.rindex(".") + 1].encode())
     put("duplicate-time.pos", head + sub(4, "00:06:30.000", "00:06:00.000"))
     put("backward-time.pos", head + sub(5, "00:07:00.000", "00:05:45.000"))
     put("negative-hpl.pos", head + sub(3, "18.90", "-18.90"))
