@@ -197,6 +197,9 @@ def test_time_window_from_the_command_line(tmp_path):
     assert doc["epochs"]["total"] == sum("06:00:00" <= t < "12:00:00" for t in times) == 719  # one gap
     assert doc["time"]["start"] == "2006-12-27T06:00:00.000"
     assert doc["time"]["end"] == "2006-12-27T11:59:30.000"
+    (read,) = doc["inputs"]
+    assert read["rows_kept"] == 719 and read["rejected"]["outside_time_range"] == len(times) - 719
+    assert read["rows_kept"] + read["n_rejected"] == read["rows_read"], "the epochs outside are counted"
 
 
 def test_gh3_confidence_command_and_report_section(tmp_path):

@@ -7,6 +7,7 @@ Gzip-compressed inputs are decompressed transparently.
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as dt
 import gzip
 import io
@@ -205,6 +206,7 @@ def read(
     station : station name; by default the reader takes it from the content or the file name.
     mapping : for ``csv``/``parquet``: canonical column name -> column name in the file.
     time_range : keep epochs with ``start <= time < stop`` (GPS time); either end may be ``None``.
+        The epochs outside are counted in the report (``rejected["outside_time_range"]``).
     columns : optional columns to keep besides the required ones (default: all the input has);
         a Parquet input does not even read the others.
     strict : raise on the first malformed row instead of counting it.
@@ -228,7 +230,11 @@ def read(
         keep = set(REQUIRED) | set(columns)
         table = table.select([c for c in table.columns if c in keep])
     if time_range is not None:
-        table = _filter_time(table, time_range)
+        kept = _filter_time(table, time_range)
+        if dropped := table.height - kept.height:  # counted like any row not kept
+            rejected = {**report.rejected, "outside_time_range": dropped}
+            report = dataclasses.replace(report, rows_kept=kept.height, rejected=rejected)
+        table = kept
     return table, report
 
 
