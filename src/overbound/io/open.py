@@ -57,7 +57,10 @@ def open_binary(source: Source) -> BinaryIO:
     head = raw.read(2)
     raw.seek(0)
     if head == _GZIP:
-        return _CheckedGzip(source_name(source), raw)  # type: ignore[return-value]
+        stream = _CheckedGzip(source_name(source), raw)
+        if isinstance(source, str | Path):
+            stream.myfileobj = raw  # GzipFile.close() then closes the file it reads too
+        return stream  # type: ignore[return-value]
     return raw
 
 
