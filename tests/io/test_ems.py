@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import datetime as dt
 import gzip
+import re
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,7 @@ import polars as pl
 import pytest
 
 from overbound.io.ems import read_ems
+from overbound.io.gpstime import PLAUSIBLE_END, PLAUSIBLE_SPAN
 from overbound.io.schema import InputError
 from overbound.sbas.frames import SbasFrames
 
@@ -196,3 +198,39 @@ def test_separate_reads_concatenate_to_one_read():
         assert np.array_equal(getattr(joined, name), getattr(once, name)), name
     first = joined.take(np.arange(5))
     assert len(first) == 5 and np.array_equal(first.data, once.data[:5])
+
+
+def test_times_outside_the_gnss_era_are_counted_rejections(tmp_path):
+    """Two-digit years read as 1980-2079: a year from PLAUSIBLE_END on, or a day before the GPS epoch
+    (1980-01-06), comes from a corrupted digit and is rejected, counted and named (issue 13)."""
+    good = _lines(HOURS[0])[:4]
+    future = f"{PLAUSIBLE_END.year % 100:02d}"
+    lines = [good[0], good[1][:4] + future + good[1][6:], good[2][:4] + "80 01 05" + good[2][12:], good[3]]
+    path = _write(tmp_path, "era.ems", lines)
+    frames, report = read_ems(path)
+    assert frames.rejected.select("line", "reason").rows() == [
+        (2, "time_out_of_range"),
+        (3, "time_out_of_range"),
+    ]
+    assert report.rejected == {"time_out_of_range": 2} and report.unaccounted == 0
+    assert report.first_bad == f"{path}:2: time_out_of_range"
+    assert frames.line.tolist() == [1, 4]
+    with pytest.raises(InputError, match=rf"era\.ems:2: time outside {re.escape(PLAUSIBLE_SPAN)}"):
+        read_ems(path, strict=True)
+
+
+def test_truncated_gzip_is_one_input_error_naming_the_file():
+    """The first 20 lines of h00.ems gzipped, cut to half the compressed bytes (PROVENANCE.md)."""
+    path = EMS / "bad" / "h00-truncated.gz"
+    for arg in (path, [HOURS[0], path]):
+        with pytest.raises(InputError, match="truncated or corrupt gzip") as err:
+            read_ems(arg)
+        assert str(path) in str(err.value) and "\n" not in str(err.value)
+
+
+def test_utf8_byte_order_mark_is_skipped(tmp_path):
+    path = tmp_path / "bom.ems"
+    path.write_bytes(b"\xef\xbb\xbf" + gzip.decompress(HOURS[0].read_bytes()))
+    frames, report = read_ems(path)
+    ref, _ = read_ems(HOURS[0])
+    assert report.rejected == {} and np.array_equal(frames.data, ref.data) and frames.line[0] == 1

@@ -6,6 +6,7 @@ from __future__ import annotations
 import datetime as dt
 import gzip
 import io
+import re
 from pathlib import Path
 
 import numpy as np
@@ -14,6 +15,7 @@ from click.testing import CliRunner
 
 from overbound.cli import main
 from overbound.io.ems import read_ems
+from overbound.io.gpstime import PLAUSIBLE_END, PLAUSIBLE_SPAN
 from overbound.io.rinex_b import read_rinex_b
 from overbound.io.schema import InputError
 from overbound.sbas.messages import decode
@@ -214,3 +216,37 @@ def test_cli_recognises_rinex_b_by_content(tmp_path):
     assert out.exists()
     res = CliRunner().invoke(main, ["sbas", "--obs", str(RINEXB), "--nav", str(NAV), "-o", str(out)])
     assert res.exit_code == 2 and "a RINEX-B SBAS message file given as --obs" in res.output
+
+
+def test_epochs_outside_the_gnss_era_are_counted_rejections(tmp_path):
+    """A two-digit year from PLAUSIBLE_END on, or a day before 1980-01-06, is a counted, named rejection."""
+    lines = _lines()[: _HEADER + 9]
+    future = f"{PLAUSIBLE_END.year % 100:02d}"
+    lines[3] = lines[3][:4] + future + lines[3][6:]
+    lines[6] = lines[6][:4] + "80 01 05" + lines[6][12:]
+    path = _write(tmp_path, "era.19b", lines)
+    frames, report = read_rinex_b(path)
+    assert frames.rejected.select("line", "reason").rows() == [
+        (4, "time_out_of_range"),
+        (7, "time_out_of_range"),
+    ]
+    assert report.rejected == {"time_out_of_range": 2} and report.unaccounted == 0
+    assert frames.line.tolist() == [10]
+    with pytest.raises(InputError, match=rf"era\.19b:4: epoch outside {re.escape(PLAUSIBLE_SPAN)}"):
+        read_rinex_b(path, strict=True)
+
+
+def test_truncated_gzip_is_one_input_error_naming_the_file():
+    """Header and first 10 records of the fixture gzipped, cut to half its bytes (PROVENANCE.md)."""
+    path = DATA / "rinexb" / "bad" / "egnos123_h02-04-truncated.gz"
+    with pytest.raises(InputError, match="truncated or corrupt gzip") as err:
+        read_rinex_b(path)
+    assert str(path) in str(err.value) and "\n" not in str(err.value)
+
+
+def test_utf8_byte_order_mark_is_skipped(tmp_path):
+    lines = _lines()[: _HEADER + 6]
+    path = tmp_path / "bom.19b"
+    path.write_bytes(b"\xef\xbb\xbf" + ("\n".join(lines) + "\n").encode())
+    frames, report = read_rinex_b(path)
+    assert len(frames) == 2 and report.rejected == {} and frames.line.tolist() == [4, 7]

@@ -25,8 +25,10 @@ all lines are decoded by one ``bytes.fromhex`` call (a 256-entry table finds the
 that fails). The CRC-24Q of every message is checked on the way (:mod:`overbound.sbas.crc`).
 The 24 hourly files of a day (73,335 messages) read in about 0.1 s.
 
-A line that does not fit the layout is rejected and counted with its file and line number; a
-file in which no line fits is not an EMS file and raises :class:`~overbound.io.schema.InputError`.
+A line that does not fit the layout is rejected and counted with its file and line number, and so
+is a line whose time falls outside :data:`~overbound.io.gpstime.PLAUSIBLE_SPAN` (a two-digit year
+reads as 1980-2079, whose future years only a corrupted digit gives); a file in which no line fits
+is not an EMS file and raises :class:`~overbound.io.schema.InputError`.
 The newer EMS layout with fractional seconds and a frequency band (L5 / DFMC) is recognised and
 refused with a clear message. A RINEX-B file given here is refused with a pointer to
 :func:`overbound.io.rinex_b.read_rinex_b`.
@@ -34,6 +36,7 @@ refused with a clear message. A RINEX-B file given here is refused with a pointe
 
 from __future__ import annotations
 
+import datetime as dt
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -41,6 +44,7 @@ from dataclasses import dataclass
 import numpy as np
 import polars as pl
 
+from overbound.io.gpstime import GPS_EPOCH, PLAUSIBLE_END, PLAUSIBLE_SPAN
 from overbound.io.open import Source, read_bytes, source_name
 from overbound.io.schema import InputError, ReadReport
 from overbound.sbas.bits import FRAME_BYTES, message_type
@@ -56,9 +60,13 @@ _DIGIT_COLS = np.array([0, 1, 2, 4, 5, 7, 8, 10, 11, 13, 14, 16, 17, 19, 20])
 _BLANK_COLS = np.array([3, 6, 9, 12, 15, 18, 21])
 _SBAS_PRN = (120, 158)
 #: Rejection reasons, by code (0: the line is kept).
-_REASONS = ("", "line_length", "layout", "bad_time", "not_sbas_prn", "type_mismatch")
+_REASONS = ("", "line_length", "layout", "bad_time", "not_sbas_prn", "type_mismatch", "time_out_of_range")
 _OK = 0
 _US = 1_000_000
+#: Times a message may carry (GPS time, microseconds since 1970-01-01): GPS_EPOCH <= t < PLAUSIBLE_END.
+_ERA_US = tuple(
+    (t - dt.datetime(1970, 1, 1)) // dt.timedelta(microseconds=1) for t in (GPS_EPOCH, PLAUSIBLE_END)
+)
 
 _HEX = np.full(256, -1, dtype=np.int16)
 for _i, _c in enumerate(b"0123456789ABCDEF"):
@@ -91,7 +99,8 @@ def read_ems(sources: Source | Sequence[Source], *, strict: bool = False) -> tup
     -----
     Rejection reasons: ``line_length`` (not 88 or 89 characters after the line end is removed,
     e.g. a truncated line), ``layout`` (a digit, blank or hex digit out of place),
-    ``bad_time`` (month, day, hour, minute or second out of range), ``not_sbas_prn`` (PRN outside
+    ``bad_time`` (month, day, hour, minute or second out of range), ``time_out_of_range`` (a time
+    outside :data:`~overbound.io.gpstime.PLAUSIBLE_SPAN`), ``not_sbas_prn`` (PRN outside
     120-158), ``type_mismatch`` (the type field differs from bits 8-13 of a message whose CRC
     holds), ``duplicate`` (same GEO, time and bits as an earlier line).
     """
@@ -148,7 +157,9 @@ def _frames_in_time_order(
 
 
 def _join(raws: list[bytes]) -> tuple[np.ndarray, np.ndarray]:
-    """All files as one byte array (each ending in a line feed) and the offset where each starts."""
+    """All files as one byte array (each ending in a line feed, a leading UTF-8 byte-order mark
+    dropped) and the offset where each starts."""
+    raws = [r[3:] if r.startswith(b"\xef\xbb\xbf") else r for r in raws]
     raws = [r if not r or r.endswith(b"\n") else r + b"\n" for r in raws]
     sizes = np.array([len(r) for r in raws], dtype=np.int64)
     return np.frombuffer(b"".join(raws), dtype=np.uint8), np.concatenate([[0], np.cumsum(sizes)[:-1]])
@@ -263,6 +274,7 @@ def _decode_lines(
     reason = np.zeros(len(mat), dtype=np.uint8)
     reason[mismatch] = _REASONS.index("type_mismatch")
     reason[(prn < _SBAS_PRN[0]) | (prn > _SBAS_PRN[1])] = _REASONS.index("not_sbas_prn")
+    reason[(time < _ERA_US[0]) | (time >= _ERA_US[1])] = _REASONS.index("time_out_of_range")
     reason[bad_time] = _REASONS.index("bad_time")
     keep = reason == _OK
     frames = {
@@ -302,6 +314,7 @@ def _explain(reason: str, length: int) -> str:
     return {
         "layout": f"malformed EMS line, expected {EMS_LAYOUT}",
         "bad_time": "date or time out of range",
+        "time_out_of_range": f"time outside {PLAUSIBLE_SPAN}",
         "not_sbas_prn": "PRN outside the SBAS range 120-158",
         "type_mismatch": "message type field differs from the type in the message bits",
     }.get(reason, reason)

@@ -40,6 +40,7 @@ Rejections are counted per record with file and line (``frames.rejected``): ``la
 or data line out of the layout, e.g. cut short, or a data line with no record), ``bad_hex``
 (a byte that is not two hex digits; the data line is named), ``byte_count`` (the data lines do
 not hold the declared number of bytes, at least 32: a truncated record), ``bad_time``,
+``time_out_of_range`` (an epoch outside :data:`~overbound.io.gpstime.PLAUSIBLE_SPAN`),
 ``not_sbas_prn``, ``not_l1`` (band/frequency other than L1, e.g. DFMC L5), ``type_mismatch`` and
 ``duplicate`` as for EMS. A wrong CRC keeps the message with ``crc_ok`` False.
 """
@@ -51,7 +52,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from overbound.io.ems import _HEX, _frames_in_time_order, _gather, _join, _Lines, _report
+from overbound.io.ems import _ERA_US, _HEX, _frames_in_time_order, _gather, _join, _Lines, _report
+from overbound.io.gpstime import PLAUSIBLE_SPAN
 from overbound.io.open import Source, read_bytes, source_name
 from overbound.io.schema import InputError, ReadReport
 from overbound.sbas.bits import FRAME_BYTES, message_type
@@ -62,7 +64,10 @@ __all__ = ["RINEX_B_LAYOUT", "read_rinex_b"]
 
 RINEX_B_LAYOUT = "PRN YY MM DD hh mm ss.s [L1 nbytes ...], then the bytes as ' XX' from column 8, 18 a line"
 #: Rejection reasons, by code (0: the record is kept).
-_REASONS = ("", "layout", "bad_hex", "byte_count", "bad_time", "not_sbas_prn", "not_l1", "type_mismatch")
+_REASONS = (
+    "", "layout", "bad_hex", "byte_count", "bad_time", "not_sbas_prn", "not_l1", "type_mismatch",
+    "time_out_of_range",
+)  # fmt: skip
 _R = {r: i for i, r in enumerate(_REASONS)}
 _SBAS_PRN = (120, 158)
 _US = 1_000_000
@@ -263,6 +268,8 @@ class _Records:
         reason = np.zeros(len(idx), np.uint8)
         reason[~l1] = _R["not_l1"]
         reason[(prn < _SBAS_PRN[0]) | (prn > _SBAS_PRN[1])] = _R["not_sbas_prn"]
+        epoch = time - _US  # the tag is the epoch's whole seconds + 1 s
+        reason[(epoch < _ERA_US[0]) | (epoch >= _ERA_US[1])] = _R["time_out_of_range"]
         reason[bad_time] = _R["bad_time"]
         reason[~layout_ok] = _R["layout"]
         return _Records(idx, prn, time, nbytes, reason)
@@ -354,6 +361,7 @@ def _explain(reason: str) -> str:
         "bad_hex": "message byte that is not two hex digits",
         "byte_count": "truncated record: the data lines do not hold the record's number of bytes (32)",
         "bad_time": "date or time out of range",
+        "time_out_of_range": f"epoch outside {PLAUSIBLE_SPAN}",
         "not_sbas_prn": "PRN outside the SBAS range 120-158",
         "not_l1": "message of another band or frequency than L1 (not read)",
         "type_mismatch": "message type field differs from the type in the message bits",
