@@ -100,6 +100,7 @@ def table() -> None:
         f"2024-01-07T00:00:{s:02d},SIM,1.0,1.5,10.0,15.0\n".encode() for s in range(40)
     )
     put(bad / "csv-gzip-truncated.csv.gz", gz(csv)[:-12])
+    put(bad / "csv-year-0000-mid-file.csv", csv.replace(b"2024-01-07T00:00:20", b"0000-01-07T00:00:20"))
 
 
 if __name__ == "__main__":

@@ -41,6 +41,13 @@ EXPECTED: dict[str, str | tuple[int, int, dict[str, int], str]] = {
     ),
     "ubx/bad/gzip-truncated.ubx.gz": "truncated or corrupt gzip stream",
     "table/bad/csv-gzip-truncated.csv.gz": "truncated or corrupt gzip stream",
+    # year 0 stopped the run with "error: year 0 is out of range", naming neither file nor line
+    "table/bad/csv-year-0000-mid-file.csv": (
+        40,
+        39,
+        {"time_out_of_range": 1},
+        f"22: time out of range: 0000-01-07 00:00:20 outside {PLAUSIBLE_SPAN}",
+    ),
     "table/bad/parquet-page-header-bit-flipped.parquet": "not a readable Parquet file",
     # the provenance JSON of the footer: a JSONDecodeError without a file name
     "table/bad/parquet-provenance-not-json.parquet": r"not a readable Parquet file \(JSONDecodeError",

@@ -97,7 +97,8 @@ def finalize_epochs(
 def _drop_implausible_times(df: pl.DataFrame, log: RowLog) -> pl.DataFrame:
     t = pl.col("time").cast(pl.Datetime("us"))
     bad = t.is_null() | (t < GPS_EPOCH) | (t >= PLAUSIBLE_END)
-    out = df.filter(bad).select("_line", "time")
+    # the time as text by polars: a Python datetime cannot hold year 0
+    out = df.filter(bad).select("_line", t.dt.to_string("%Y-%m-%d %H:%M:%S%.f").alias("time"))
     if not out.height:
         return df
     line, time = out.row(0)
