@@ -237,3 +237,11 @@ def test_outputs_are_byte_identical_whatever_the_threads_and_folder(tmp_path: Pa
         trees.append(_tree(work / "out"))
     assert set(trees[0]) >= {"summary.json", "report.html", "parametric.json", "confidence-vertical.json"}
     assert trees[0] == trees[1], [k for k in trees[0] if trees[0][k] != trees[1].get(k)]
+
+
+def test_a_second_analyze_into_a_directory_in_use_stops_at_once(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    with staged_directory(out, command="analyze"):  # a run in progress holds the lock
+        res = CliRunner().invoke(main, ["analyze", str(POS), "--reference", USLO_REFERENCE, "-o", str(out)])
+    assert res.exit_code == 2
+    assert res.output == f"error: {out}: in use by another overbound run (lock .out.lock); wait for it\n"

@@ -119,7 +119,7 @@ def _locked(target: Path) -> Iterator[None]:
             raise OutputError(target, f"cannot write beside it ({exc.strerror})") from None
         if not _try_lock(fd):
             os.close(fd)
-            raise OutputError(target, f"in use by another overbound run (lock file {path.name}); wait for it")
+            raise OutputError(target, f"in use by another overbound run (lock {path.name}); wait for it")
         # The file may have been unlinked by the run that held it just before we locked it.
         try:
             same = os.stat(path).st_ino == os.fstat(fd).st_ino

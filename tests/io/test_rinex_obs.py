@@ -12,8 +12,9 @@ import numpy as np
 import polars as pl
 import pytest
 
-from overbound.io.rinex_obs import RINEX2_CODES, read_rinex_obs
-from overbound.io.schema import InputError
+from overbound.io.gpstime import PLAUSIBLE_END
+from overbound.io.rinex_obs import RINEX2_CODES, RinexObs, read_rinex_obs
+from overbound.io.schema import InputError, ReadReport
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "rinex"
 SYNT = DATA / "SYNT0140_cut.19o.gz"  # RINEX 2.11, GPS, C1 L1 S1, 13-14 satellites
@@ -323,3 +324,194 @@ def test_systems_and_codes_select_columns_and_rows():
     assert obs.table.select("time", "sat", "C1C", "L1C").equals(g.select("time", "sat", "C1C", "L1C"))
     with pytest.raises(InputError, match=r"observation codes \['C9Z'\] not in the file"):
         read_rinex_obs(ESBC, codes=["C9Z"])
+
+
+# --------------------------------------------------------------------------- issue 13: nothing lost
+
+BAD = DATA / "bad"  # damaged copies of the fixtures, written by bad/make_rinex_obs_bad.py
+
+
+def _balanced(report) -> None:
+    assert report.unaccounted == 0, report.to_dict()
+
+
+def _mutated(tmp_path: Path, src: Path, name: str, edit) -> tuple[RinexObs, ReadReport, list[str]]:
+    """Read a copy of ``src`` whose lines ``edit(lines, epoch_line_indices)`` changed in place."""
+    lines = _text(src).splitlines()
+    body = next(k for k, s in enumerate(lines) if "END OF HEADER" in s) + 1
+    v3 = lines[0][5:6] == "3"
+    epochs = [
+        k
+        for k in range(body, len(lines))
+        if (lines[k][:1] == ">" if v3 else lines[k][18:19] == "." and lines[k][26:28] == "  ")
+    ]
+    edit(lines, epochs)
+    obs, report = read_rinex_obs(_write(tmp_path, name, lines))
+    _balanced(report)
+    return obs, report, lines
+
+
+def test_event_flag_and_count_that_swallow_observations_are_rejected():
+    """Issue 13: an epoch flag changed to 3 with a count of 99 read the next 99 lines (this epoch's
+    observations and all of the next epoch) as header records: 48 of 73 records lost, none
+    rejected. The lines after an event's epoch line are not header lines, so the event record is
+    malformed: rejected at its line, and the reading goes on at the next epoch line."""
+    path = BAD / "rinex2-event-flag-3-count-99.20o"
+    lines = path.read_text().splitlines()
+    event = next(k for k, s in enumerate(lines) if s[18:19] == "." and s[28:32] == "3 99")
+    obs, report = read_rinex_obs(path)
+    _balanced(report)
+    assert report.rejected == {"bad_event": 1} and report.first_bad == f"{event + 1}: bad_event"
+    assert obs.rejected.select("line", "reason").rows() == [(event + 1, "bad_event")]
+    assert obs.events.height == 0
+    ref, _ = read_rinex_obs(ESBC_V2)
+    minutes = [dt.datetime(2020, 6, 25, 0, m, s) for m, s in ((1, 0), (2, 0), (2, 30))]
+    assert obs.epochs["time"].to_list() == minutes  # 00:01:30 (the damaged epoch) is the one lost
+    assert obs.table.equals(ref.table.filter(pl.col("time").is_in(minutes)))
+    assert report.rows_kept == 73 and report.rows_read == 74
+    with pytest.raises(InputError, match=rf"count-99\.20o:{event + 1}: event record .* not followed"):
+        read_rinex_obs(path, strict=True)
+
+
+def test_event_records_followed_by_header_lines_are_kept(tmp_path):
+    """The check of the lines after an event accepts labels of any case and ``#`` labels."""
+
+    def edit(lines, epochs):
+        lines[epochs[2] : epochs[2]] = [
+            f"{'':28}4  2",
+            f"{'':60}# OF SATELLITES",
+            f"{'A COMMENT':60}comment",
+        ]
+
+    obs, report, _ = _mutated(tmp_path, SYNT, "event.19o", edit)
+    assert report.n_rejected == 0 and obs.events["records"].to_list() == [2]
+
+
+def test_corrupt_hatanaka_stream_is_refused():
+    """Issue 13: one duplicated line of a CRINEX file kept 2 of 3 epochs (86 of 129 records) and
+    rejected nothing: ``crx2rnx`` only warned. The warning is now an error naming the file."""
+    path = BAD / "crinex-duplicated-line.crx.gz"
+    with pytest.raises(
+        InputError,
+        match=r"duplicated-line\.crx\.gz: corrupt Hatanaka \(CRINEX\) stream: crx2rnx: line 148 : skip",
+    ):
+        read_rinex_obs(path)
+
+
+@pytest.mark.parametrize(
+    ("case", "rejected"),
+    [
+        ("hour 24", {"bad_epoch": 1}),
+        ("hour 99", {"bad_epoch": 1}),
+        ("line deleted", {"record_length": 1}),
+        ("line duplicated", {"record_length": 1}),
+        ("truncated", {"truncated": 1}),
+        ("count 99", {"record_length": 1}),
+        ("stray line before the first epoch", {"no_epoch": 1}),
+        ("flag 6", {"orphan_slips": 1}),  # cycle slips at a time without observations
+    ],
+)
+def test_epoch_level_rejections_count_one_row_each(tmp_path, case, rejected):
+    """Issue 13's rule, rows read = kept + rejected: a rejected epoch record is one row read (its
+    satellite count cannot be trusted), a satellite record is one row."""
+
+    def edit(lines, epochs):
+        e = epochs[4]
+        if case.startswith("hour"):
+            lines[e] = lines[e][:10] + case[-2:] + lines[e][12:]
+        elif case == "line deleted":
+            del lines[e + 5]
+        elif case == "line duplicated":
+            lines.insert(e + 5, lines[e + 5])
+        elif case == "truncated":
+            del lines[epochs[-1] + 5 :]
+        elif case == "count 99":
+            lines[e] = lines[e][:29] + " 99" + lines[e][32:]
+        elif case == "flag 6":
+            lines[e] = lines[e][:28] + "6" + lines[e][29:]
+        else:
+            lines.insert(epochs[0], "  garbage")
+
+    _, report, _ = _mutated(tmp_path, SYNT, "mutated.19o", edit)
+    ref, _ = read_rinex_obs(SYNT)
+    assert report.rejected == rejected
+    lost = 0 if "no_epoch" in rejected else ref.epochs["nsat"][-1 if case == "truncated" else 4]
+    assert report.rows_kept == ref.table.height - lost
+    assert report.rows_read == report.rows_kept + 1
+
+
+def test_satellite_rejections_and_a_systems_selection_balance(tmp_path):
+    def edit(lines, epochs):
+        e = epochs[3]
+        lines[e] = lines[e][:35] + "?" + lines[e][36:]  # bad satellite identifier
+        e = epochs[5]
+        lines[e] = lines[e][:35] + "E07" + lines[e][38:]  # Galileo: no observation types in a GPS file
+
+    _, report, _ = _mutated(tmp_path, SYNT, "sats.19o", edit)
+    assert report.rejected == {"bad_satellite": 1, "unknown_system": 1}
+    full, _ = read_rinex_obs(ESBC)
+    _, report = read_rinex_obs(ESBC, systems="G")
+    _balanced(report)  # the other systems' records are skipped, not read
+    assert report.rows_read == report.rows_kept == full.table.filter(pl.col("system") == "G").height
+
+
+@pytest.mark.parametrize(
+    ("date", "plausible"),
+    [
+        ("0000 06 25", False),
+        ("9999 06 25", False),
+        ("1979 12 31", False),
+        ("1980 01 05", False),
+        ("1980 01 06", True),
+        (f"{PLAUSIBLE_END.year - 1} 12 31", True),
+        (f"{PLAUSIBLE_END.year} 01 01", False),
+        ("2020 13 01", False),
+        ("2020 02 30", False),
+    ],
+)
+def test_rinex3_epochs_outside_the_plausible_span_are_rejected(tmp_path, date, plausible):
+    def edit(lines, epochs):
+        e = epochs[4]
+        lines[e] = lines[e][:2] + date + lines[e][12:]
+
+    obs, report, _ = _mutated(tmp_path, ESBC, "years.rnx", edit)
+    ref, _ = read_rinex_obs(ESBC)
+    if plausible:
+        assert report.n_rejected == 0 and obs.table.height == ref.table.height
+    else:
+        assert report.rejected == {"bad_epoch": 1} and obs.epochs.height == ref.epochs.height - 1
+        assert obs.table.height == ref.table.height - ref.epochs["nsat"][4]
+    assert obs.table["time"].dt.year().is_between(1980, PLAUSIBLE_END.year - 1).all()
+
+
+@pytest.mark.parametrize(
+    ("yymmdd", "plausible"),
+    [
+        ("80  1  5", False),  # 1980-01-05: before GPS time
+        ("80  1  6", True),
+        ("99 12 31", True),  # 1999
+        (" 0  1  1", True),  # 2000
+        ("79 12 31", False),  # 2079
+        (f"{(PLAUSIBLE_END.year - 2000) % 100:2d}  1  1", False),
+    ],
+)
+def test_rinex2_two_digit_years(tmp_path, yymmdd, plausible):
+    def edit(lines, epochs):
+        e = epochs[2]
+        lines[e] = " " + yymmdd + lines[e][9:]
+
+    obs, report, _ = _mutated(tmp_path, SYNT, "years.19o", edit)
+    assert report.rejected == ({} if plausible else {"bad_epoch": 1})
+    if plausible:
+        assert obs.epochs["time"][2].date() == dt.date(
+            int(yymmdd[:2]) + (2000 if int(yymmdd[:2]) < 80 else 1900), int(yymmdd[3:5]), int(yymmdd[6:8])
+        )
+
+
+def test_unreadable_header_times_name_file_and_line(tmp_path):
+    lines = _text(SYNT).splitlines()
+    i = next(k for k, s in enumerate(lines) if "TIME OF FIRST OBS" in s)
+    for sec in ("          inf", "          nan", "   99999.0000"):
+        lines[i] = lines[i][:30] + sec + lines[i][43:]
+        with pytest.raises(InputError, match=rf"first\.19o:{i + 1}: date out of range"):
+            read_rinex_obs(_write(tmp_path, "first.19o", lines))

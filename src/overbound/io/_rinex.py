@@ -9,25 +9,27 @@ fields in exponent form, by numpy's string-to-float cast after the Fortran ``D``
 turned into ``E`` (:func:`parse_float`).
 
 Input bytes come through :func:`load_bytes`: plain, gzip, and anything the ``hatanaka`` package
-undoes (Hatanaka compact RINEX, Unix ``.Z``, bzip2, zip).
+undoes (Hatanaka compact RINEX, Unix ``.Z``, bzip2, zip). Times read from records are checked
+against the plausible span of GNSS epochs by :func:`plausible_gpst`.
 """
 
 from __future__ import annotations
 
-import gzip
-import zlib
+import datetime as dt
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from overbound.io.gpstime import leap_seconds
+from overbound.io.gpstime import PLAUSIBLE_END, leap_seconds
 from overbound.io.open import Source, open_binary, source_name
 from overbound.io.schema import InputError
 
 __all__ = [
     "BLANK",
     "GPS_EPOCH_US",
+    "PLAUSIBLE_END_US",
     "US",
     "Lines",
     "civil_to_us",
@@ -35,6 +37,7 @@ __all__ = [
     "parse_digits",
     "parse_fixed",
     "parse_float",
+    "plausible_gpst",
     "rinex_version",
     "to_gpst",
 ]
@@ -42,6 +45,8 @@ __all__ = [
 US = 1_000_000
 #: 1980-01-06 00:00:00 in microseconds since 1970-01-01 (GPS time's origin on the table's axis).
 GPS_EPOCH_US = 315_964_800 * US
+#: :data:`overbound.io.gpstime.PLAUSIBLE_END` (exclusive) on the same axis.
+PLAUSIBLE_END_US = (PLAUSIBLE_END - dt.datetime(1970, 1, 1)) // dt.timedelta(microseconds=1)
 BLANK = ord(" ")
 _MINUS, _POINT = ord("-"), ord(".")
 _PAD = 512  # blank bytes after the text, so that every field window stays inside the buffer
@@ -58,14 +63,12 @@ def load_bytes(source: Source) -> bytes:
     ------
     InputError
         The file is missing, a compressed stream is truncated or corrupt, or a Hatanaka file
-        cannot be expanded.
+        cannot be expanded or expands only with a warning of ``crx2rnx`` (see :func:`_expand`).
     """
     name = source_name(source)
     stream = open_binary(source)
     try:
-        raw = stream.read()
-    except (EOFError, gzip.BadGzipFile, zlib.error, OSError) as exc:
-        raise InputError(name, f"truncated or corrupt gzip stream ({exc})") from None
+        raw = stream.read()  # a corrupt gzip stream raises InputError naming the file
     finally:
         if isinstance(source, str | Path):
             stream.close()
@@ -75,17 +78,40 @@ def load_bytes(source: Source) -> bytes:
 
 
 def _expand(raw: bytes, name: str) -> bytes:
+    """The text of a Hatanaka (CRINEX), ``.Z``, bzip2 or zip stream, or :class:`InputError`.
+
+    ``crx2rnx`` reports the corruption it can detect (a duplicated, deleted or damaged line
+    breaks the differential chain) as a *warning* and goes on: it skips records "until an
+    initialized epoch is found", often to the end of the file, and the text it returns looks
+    complete. Such a warning is treated as a corrupt stream and refused, not trusted up to the
+    point of damage, because (1) the compact format is differential, so a damaged line can
+    corrupt the values of every satellite it carries from there on without being detected, and
+    what precedes the detection point is not known to be sound either (the detection comes lines
+    after the damage); (2) the decompressor does not say how many records it dropped, so they
+    could not be counted as rejected; (3) its line numbers are those of the compressed file,
+    not of the text the reader reports lines of.
+    """
     try:
         import hatanaka
     except ImportError:  # pragma: no cover - a dependency of the package
         raise InputError(
             name, "Hatanaka / .Z input needs the 'hatanaka' package (pip install hatanaka)"
         ) from None
-    try:
-        return hatanaka.decompress(raw)
-    except Exception as exc:  # hatanaka raises its own exception types and ValueError
-        text = str(exc).strip().splitlines()
-        raise InputError(name, f"cannot expand compressed RINEX: {text[-1] if text else exc!r}") from None
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            out = hatanaka.decompress(raw)
+        except Exception as exc:  # hatanaka raises its own exception types and ValueError
+            text = str(exc).strip().splitlines()
+            raise InputError(name, f"cannot expand compressed RINEX: {text[-1] if text else exc!r}") from None
+    corrupt = [w for w in caught if issubclass(w.category, UserWarning)]  # what `hatanaka` warns with
+    for w in caught:
+        if not issubclass(w.category, UserWarning):  # e.g. a dependency's DeprecationWarning
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    if corrupt:
+        text = " ".join(" ".join(str(w.message).split()) for w in corrupt)
+        raise InputError(name, f"corrupt Hatanaka (CRINEX) stream: {text}")
+    return out
 
 
 @dataclass(frozen=True, slots=True)
@@ -272,6 +298,13 @@ def civil_to_us(
     ok &= (minute >= 0) & (minute <= 59) & (us >= 0) & (us <= 61 * US) & (year >= 1980) & (year < 2200)
     days = first.astype("datetime64[D]").astype(np.int64) + day - 1
     return ((days * 86_400 + hour * 3600 + minute * 60) * US + us).astype(np.int64), ok
+
+
+def plausible_gpst(t_us: np.ndarray) -> np.ndarray:
+    """Which GPS times (microseconds since 1970) lie in ``1980-01-06 <= t <`` :data:`PLAUSIBLE_END_US`
+    (:data:`overbound.io.gpstime.PLAUSIBLE_SPAN`): a time outside is a corrupted record."""
+    t_us = np.asarray(t_us, dtype=np.int64)
+    return (t_us >= GPS_EPOCH_US) & (t_us < PLAUSIBLE_END_US)
 
 
 def to_gpst(t_us: np.ndarray, time_system: str, name: str) -> np.ndarray:

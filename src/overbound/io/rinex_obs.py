@@ -50,11 +50,33 @@ second; ``bench/bench_rinex.py`` measures it.
 
 Malformed input
 ---------------
-A record whose line count does not match its epoch line, an unreadable epoch line or satellite
-identifier, or a file that ends inside a record is rejected and counted with file and line;
-an unreadable observation field becomes NaN and is counted under ``invalidated``. A file that
-is not RINEX observation data, an unsupported version, a truncated header or compressed stream
-raises :class:`~overbound.io.schema.InputError` with a one-line message.
+The report keeps issue 13's rule, ``rows_read = rows_kept + rejected`` (``unaccounted == 0``),
+where a *row* is
+
+* a satellite record of an observation epoch (flags 0 and 1): kept as a table row, or rejected
+  by itself (``bad_satellite``: unreadable identifier; ``unknown_system``: a system without
+  observation types; ``duplicate_satellite``: repeated in its epoch). Records of systems left
+  out by ``systems=`` are skipped, neither read nor rejected;
+* a rejected epoch record, counted as **one** row whatever its satellite count, because that
+  count is what cannot be trusted (or read) in a damaged record: ``bad_epoch`` (unreadable
+  date, flag or count, or a time outside :data:`overbound.io.gpstime.PLAUSIBLE_SPAN`, GPS
+  time), ``record_length`` (the record's lines do not end on an epoch line), ``truncated`` (the
+  file ends inside it), ``bad_event`` (an event record of flags 2-5 whose count of lines are not
+  all header lines, label in columns 61-80: a damaged flag or count that would swallow
+  observations as "header records"), ``orphan_slips`` (a cycle-slip record, flag 6, at a time
+  that has no observation epoch: most likely an observation epoch whose flag was damaged, whose
+  satellites would otherwise vanish from the table unseen), and ``no_epoch`` (non-blank lines
+  before the first epoch line). The lines from a rejected epoch line to the next epoch line read
+  belong to that row.
+
+Event records (flags 2-5) and cycle-slip records (flag 6) that are sound are not rows (their
+count is in the notes, by flag). Each rejection is listed with file, line (1-based) and reason
+in ``rejected``; ``first_bad`` names the first. An unreadable observation field becomes NaN and
+is counted under ``invalidated`` (the row is kept). A file that is not RINEX observation data,
+an unsupported version, a truncated header, an unreadable header time, or a truncated or corrupt
+compressed stream (including one that ``crx2rnx`` expands only with a warning, see
+:func:`overbound.io._rinex.load_bytes`) raises :class:`~overbound.io.schema.InputError` with a
+one-line message naming the file (and line).
 """
 
 from __future__ import annotations
@@ -67,6 +89,7 @@ import numpy as np
 import polars as pl
 
 from overbound.io._rinex import (
+    GPS_EPOCH_US,
     US,
     Lines,
     civil_to_us,
@@ -74,9 +97,11 @@ from overbound.io._rinex import (
     parse_digits,
     parse_fixed,
     parse_float,
+    plausible_gpst,
     rinex_version,
     to_gpst,
 )
+from overbound.io.gpstime import PLAUSIBLE_SPAN
 from overbound.io.open import Source, source_name
 from overbound.io.schema import InputError, ReadReport
 from overbound.sbas.frames import REJECTED_SCHEMA
@@ -118,12 +143,16 @@ _REASONS_TEXT = {
     "no_epoch": "line outside any epoch record",
     "record_length": "lines of the record do not match the count on its epoch line",
     "truncated": "file ends inside this epoch record",
-    "bad_epoch": "unreadable epoch line (date, flag or count)",
+    "bad_epoch": f"unreadable epoch line (date, flag or count) or time outside {PLAUSIBLE_SPAN}",
+    "bad_event": "event record (flags 2-5) not followed by its count of header lines (label in cols 61-80)",
+    "orphan_slips": "cycle-slip record (flag 6) at a time without an observation epoch",
     "bad_satellite": "unreadable satellite identifier",
     "unknown_system": "satellite system without observation types in the header",
     "duplicate_satellite": "satellite repeated in the epoch",
     "bad_value": "unreadable observation field (set to NaN)",
 }
+#: Reasons that reject a whole epoch record (one row each, whatever its satellite count).
+_RECORD_REASONS = ("no_epoch", "record_length", "truncated", "bad_epoch", "bad_event", "orphan_slips")
 
 
 @dataclass(frozen=True, slots=True)
@@ -211,16 +240,18 @@ def read_rinex_obs(
     Returns
     -------
     obs : :class:`RinexObs`.
-    report : ``rows_read`` satellite records seen, ``rows_kept`` table rows, ``rejected`` by reason
-        (records), ``invalidated`` (``bad_value``: fields set to NaN), ``first_bad``; notes give
+    report : ``rows_read`` = ``rows_kept`` + rejected rows (satellite records, and one row per
+        rejected epoch record: see "Malformed input" in the module notes), ``rejected`` by
+        reason, ``invalidated`` (``bad_value``: fields set to NaN), ``first_bad``; notes give
         the epoch counts by flag.
 
     Raises
     ------
     InputError
-        Not a RINEX observation file, unsupported version, no ``END OF HEADER``, a truncated or
-        corrupt compressed stream, observation types changed by an event record, or (``strict``)
-        any malformed record.
+        Not a RINEX observation file, unsupported version, no ``END OF HEADER``, an unreadable
+        header field, a truncated or corrupt compressed stream (Hatanaka: also one that
+        ``crx2rnx`` warns about), observation types changed by an event record, or
+        (``strict``) any malformed record.
     """
     name = source_name(source)
     lines = Lines.of(load_bytes(source))
@@ -385,6 +416,8 @@ def _header_time(body: str, name: str, i: int) -> int:
         sec = float(body[30:43])
     except ValueError:
         raise InputError(name, f"unreadable time {body[:43].strip()!r}", line=i + 1) from None
+    if not (0 <= sec < 61 and 0 <= y < 10_000):  # also NaN and inf
+        raise InputError(name, f"date out of range {body[:43].strip()!r}", line=i + 1)
     t, ok = civil_to_us(*(np.array([v]) for v in (y, mo, d, h, mi, round(sec * US))))
     if not ok[0]:
         raise InputError(name, f"date out of range {body[:43].strip()!r}", line=i + 1)
@@ -469,12 +502,18 @@ def _epoch_records(lines: Lines, body: int, header: ObsHeader, v3: bool, log: _L
     n_head = np.where(v3 | ~sat_flags, 1, np.maximum(1, -(-count // 12)))
     size = np.where(sat_flags & ~v3, n_head + count * per_sat, 1 + count)
     size = np.where(count_ok & (count >= 0), size, 1)
-    keep = _walk(lines, body, cand, size, log)
+    special = count_ok & (count >= 0) & (flag >= 2) & (flag <= 5)
+    keep = _walk(lines, body, cand, size, _headers_follow(lines, cand, count, special), log)
     cand, flag, count, n_head = cand[keep], flag[keep], count[keep], n_head[keep]
     bad = ~count_ok[keep] | (flag < 0) | (flag > 6)
     time, clock, time_ok = _epoch_times(lines, cand, flag, header, v3)
     bad |= ~time_ok
     log.add(cand[bad], "bad_epoch")
+    slips = ~bad & (flag == 6)
+    if slips.any():  # cycle slips of an epoch that has no observations: a damaged flag, most likely
+        orphan = slips & ~np.isin(time, time[~bad & (flag <= 1)])
+        log.add(cand[orphan], "orphan_slips")
+        bad |= orphan
     good = ~bad
     return _Epochs(cand[good], flag[good].astype(np.int8), count[good], n_head[good], time[good], clock[good])
 
@@ -499,12 +538,39 @@ def _candidates(lines: Lines, rows: np.ndarray, v3: bool) -> np.ndarray:
     return rows[dated | undated]
 
 
-def _walk(lines: Lines, body: int, cand: np.ndarray, size: np.ndarray, log: _Log) -> np.ndarray:
+def _headers_follow(lines: Lines, cand: np.ndarray, count: np.ndarray, special: np.ndarray) -> np.ndarray:
+    """False for an event record (``special``: flags 2-5) whose ``count`` following lines (those
+    the file has) are not all header lines; True for every other candidate.
+
+    A header line carries its label from column 61 on, which begins with a letter or ``#``;
+    column 61 of an observation line is a digit or blank (inside the 4th F14.3 field), that of a
+    RINEX 2 epoch line with 10 or more satellites the digit of a PRN. So an epoch flag or count
+    damaged into an event record that would swallow observations is found at its first line.
+    """
+    out = np.ones(len(cand), bool)
+    ev = np.flatnonzero(special)
+    if not ev.size:
+        return out
+    first = cand[ev] + 1
+    last = np.minimum(first + count[ev], len(lines))  # lines past the end are the walk's "truncated"
+    lo = int(first.min())
+    c60 = lines.col(np.arange(lo, max(int(last.max()), lo)), 60) | 0x20  # lower case
+    label = ((c60 >= ord("a")) & (c60 <= ord("z"))) | (c60 == ord("#"))
+    done = np.concatenate([[0], np.cumsum(label)])  # done[i]: header-like lines in lo .. lo+i-1
+    out[ev] = done[last - lo] - done[first - lo] == last - first
+    return out
+
+
+def _walk(
+    lines: Lines, body: int, cand: np.ndarray, size: np.ndarray, sound: np.ndarray, log: _Log
+) -> np.ndarray:
     """Indices of the candidates that start records, following the record lengths from the first.
 
-    The usual case (every record ends where the next candidate starts) is checked at once; only a
-    damaged file goes through the loop, which rejects a record whose end does not fall on an
-    epoch line (or the end of the file) and resumes at the next candidate.
+    The usual case (every record ends where the next candidate starts, every event record is
+    ``sound``) is checked at once; only a damaged file goes through the loop, which rejects an
+    event record not followed by header lines (``bad_event``) or a record whose end does not
+    fall on an epoch line or the end of the file (``record_length``), and resumes at the next
+    candidate.
     """
     n = len(lines)
     if not len(cand):
@@ -516,13 +582,17 @@ def _walk(lines: Lines, body: int, cand: np.ndarray, size: np.ndarray, log: _Log
         log.add(body + nonblank_before[0], "no_epoch")
     end = cand + size
     tail_blank = _blank_from(lines)
-    if (end[:-1] == cand[1:]).all() and end[-1] <= n and tail_blank[end[-1]]:
+    if sound.all() and (end[:-1] == cand[1:]).all() and end[-1] <= n and tail_blank[end[-1]]:
         return np.arange(len(cand))
     index_of = np.full(n + 1, -1, np.int64)
     index_of[cand] = np.arange(len(cand))
     keep, k = [], 0
     while k < len(cand):
         j = int(end[k])
+        if not sound[k]:
+            log.add(cand[k], "bad_event")
+            k += 1
+            continue
         if j > n:
             log.add(cand[k], "truncated")
             break
@@ -563,7 +633,8 @@ def _epoch_times(
     us = np.round(np.nan_to_num(sec) * US).astype(np.int64)
     t, date_ok = civil_to_us(year, *(p[0] for p in parts), us)
     ok = y_ok & s_ok & ~s_blank & date_ok & np.logical_and.reduce([p[1] for p in parts])
-    t = to_gpst(t, header.time_system, "")
+    t = to_gpst(np.where(ok, t, GPS_EPOCH_US), header.time_system, "")
+    ok &= plausible_gpst(t)  # 1980-01-06 to the present and a margin, in GPS time
     event = (flag >= 2) & (flag <= 5)
     undated = event & (lines.chars(cand, 0 if not v3 else 2, 26 if not v3 else 27) == ord(" ")).all(axis=1)
     clock, c_ok, _ = parse_fixed(lines.chars(cand, clock_col, clock_w), clock_d)
@@ -598,7 +669,7 @@ class _Sats:
     system: np.ndarray  # uint8 letter
     prn: np.ndarray  # int64
     first_line: np.ndarray  # index of the record's first data line
-    n_seen: int
+    n_seen: int  # satellite records read: kept, or rejected for a satellite-level reason
 
 
 def _satellite_records(
@@ -629,9 +700,12 @@ def _satellite_records(
     ok = ~bad & ~unknown
     key = (epoch * 256 + system) * 1000 + prn
     ok &= _first_occurrence(key, ok, id_line, log)
-    if keep_sys is not None:
-        ok &= np.isin(system, np.frombuffer("".join(sorted(keep_sys)).encode(), np.uint8))
-    return _Sats(epoch[ok], system[ok], prn[ok], first_line[ok], n_seen=len(epoch))
+    n_seen = len(epoch)
+    if keep_sys is not None:  # records of the other systems are skipped unread (not rejected)
+        wanted = np.isin(system, np.frombuffer("".join(sorted(keep_sys)).encode(), np.uint8))
+        n_seen -= int((ok & ~wanted).sum())
+        ok &= wanted
+    return _Sats(epoch[ok], system[ok], prn[ok], first_line[ok], n_seen=n_seen)
 
 
 def _first_occurrence(key: np.ndarray, ok: np.ndarray, where: np.ndarray, log: _Log) -> np.ndarray:
@@ -805,7 +879,7 @@ def _report(obs: RinexObs, log: _Log, n_seen: int) -> ReadReport:
     return ReadReport(
         source=obs.file,
         format=f"rinex-obs {h.version:.2f}",
-        rows_read=n_seen,
+        rows_read=n_seen + sum(log.counts[r] for r in _RECORD_REASONS),
         rows_kept=obs.table.height,
         rejected=counts,
         invalidated=invalid,
