@@ -288,3 +288,96 @@ def test_gathered_elements_give_broadcast_state_bit_for_bit():
     np.testing.assert_array_equal(clock_at(g, t, off), ref.clock)
     with pytest.raises(ValueError, match="rows must be >= 0"):
         ephemeris_elements(eph.table, np.array([-1]))
+
+
+# --------------------------------------------------------------------------- issue 13: each record once
+
+BAD = DATA / "bad"  # damaged copies (PROVENANCE.md)
+
+
+def test_non_finite_fields_and_out_of_span_years_reject_each_record_once():
+    """Infinity, NaN, a NUL byte in a number and the year 2079: four records, four rejections."""
+    path = BAD / "nav-nonfinite-fields.19n"
+    eph, report = read_rinex_nav(path)
+    assert (report.rows_read, report.rows_kept) == (6, 2) and report.unaccounted == 0
+    assert report.rejected == {"bad_number": 3, "time_out_of_range": 1}
+    assert eph.rejected.select("line", "reason").rows() == [
+        (18, "bad_number"),
+        (26, "bad_number"),
+        (34, "bad_number"),
+        (42, "time_out_of_range"),
+    ]
+    assert eph.table["prn"].to_list() == [4, 21]
+    assert np.isfinite(eph.table.select(pl.col(pl.Float64)).to_numpy()).all()
+
+
+def _record_file(tmp_path: Path, path: Path, edit) -> tuple:
+    lines = _lines(path)
+    body = next(i for i, s in enumerate(lines) if "END OF HEADER" in s) + 1
+    first = body + 8 * 3 if path == BRDC else next(i for i in range(body, len(lines)) if lines[i][0] == "G")
+    edit(lines, first)
+    out = tmp_path / path.name.replace(".gz", "")
+    out.write_text("\n".join(lines) + "\n")
+    return first + 1, *read_rinex_nav(out)
+
+
+def _field(lines: list[str], i: int, k: int, text: str, v3: bool = False) -> None:
+    c = (23 if v3 else 22) + 19 * k if lines[i][:3].strip() else (4 if v3 else 3) + 19 * k
+    lines[i] = lines[i][:c] + text.rjust(19) + lines[i][c + 19 :]
+
+
+@pytest.mark.parametrize(
+    ("edit", "reason"),
+    [
+        (lambda s, i: _field(s, i, 1, "Infinity"), "bad_number"),
+        (lambda s, i: _field(s, i + 6, 3, "-inf"), "bad_number"),  # IODC
+        (lambda s, i: _field(s, i + 4, 0, "nan"), "bad_number"),
+        (lambda s, i: _field(s, i + 5, 2, "9e99"), "bad_number"),  # week beyond 32 bits
+        (lambda s, i: _field(s, i + 3, 0, "1e300"), "time_out_of_range"),  # toe
+        (lambda s, i: _field(s, i + 7, 0, "1e300"), "time_out_of_range"),  # transmission time
+        # a bad epoch and a bad number in one record: rejected once, for the first
+        (lambda s, i: (_field(s, i, 1, "1.0X"), s.__setitem__(i, s[i][:9] + "99" + s[i][11:])), "bad_epoch"),
+        (lambda s, i: s.__setitem__(i, s[i][:3] + "79" + s[i][5:]), "time_out_of_range"),  # 2079
+        (lambda s, i: s.__setitem__(i, s[i][:3] + "18" + s[i][5:]), "toc_toe_mismatch"),  # 2018
+        (lambda s, i: s.__setitem__(i, s[i][:3] + "  " + s[i][5:]), "bad_epoch"),  # blank year
+        (lambda s, i: s.__setitem__(i + 2, s[i + 2][:60] + "00" + s[i + 2][60:]), "line_too_long"),
+        (lambda s, i: s.__setitem__(i + 1, s[i + 1][:40] + "\x00" + s[i + 1][41:]), "bad_number"),
+    ],
+    ids=[
+        "inf",
+        "minus-inf",
+        "nan",
+        "huge-int",
+        "toe",
+        "ttx",
+        "epoch-and-number",
+        "2079",
+        "2018",
+        "blank-year",
+        "long-line",
+        "nul",
+    ],
+)
+def test_a_damaged_rinex2_record_is_read_once_and_rejected_once(tmp_path, edit, reason):
+    line, eph, report = _record_file(tmp_path, BRDC, edit)
+    assert report.rows_read == 79 and report.rows_kept == 78 and report.unaccounted == 0
+    assert report.rejected == {reason: 1} and eph.rejected["line"].to_list() == [line]
+
+
+@pytest.mark.parametrize(
+    ("edit", "reason", "read"),
+    [
+        (lambda s, i: s.__setitem__(i, s[i][:4] + "1979" + s[i][8:]), "time_out_of_range", 31),
+        (lambda s, i: s.__setitem__(i, s[i][:4] + "9999" + s[i][8:]), "time_out_of_range", 31),
+        (lambda s, i: s.__setitem__(i, s[i][:4] + "0000" + s[i][8:]), "time_out_of_range", 31),
+        (lambda s, i: s.__setitem__(i, "X" + s[i][1:]), "unknown_system", 31),
+        (lambda s, i: s.__setitem__(i, "\x00" + s[i][1:]), "unknown_system", 31),
+        (lambda s, i: _field(s, i + 2, 3, "NaN", v3=True), "bad_number", 31),
+    ],
+    ids=["1979", "9999", "0000", "system-X", "system-NUL", "nan"],
+)
+def test_a_damaged_rinex3_record_is_read_once_and_rejected_once(tmp_path, edit, reason, read):
+    line, eph, report = _record_file(tmp_path, MIXED, edit)
+    assert report.rows_read == read and report.rows_kept == 30 and report.unaccounted == 0
+    assert report.rejected == {reason: 1} and eph.rejected["line"].to_list() == [line]
+    assert report.first_bad.endswith(f":{line}: {reason}")

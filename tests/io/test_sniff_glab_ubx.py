@@ -15,7 +15,10 @@ DATA = Path(__file__).resolve().parents[1] / "data"
 GLAB = sorted(
     p
     for p in (DATA / "glab").rglob("*")
-    if p.is_file() and p.name not in ("PROVENANCE.md", "empty.glab") and not p.name.endswith(".summary.txt")
+    if p.is_file()
+    and p.name not in ("PROVENANCE.md", "empty.glab")
+    and not p.name.endswith(".summary.txt")
+    and p.parent.name != "bad"  # the bad corpus: tests/io/test_bad_corpus.py
 )
 UBX = sorted((DATA / "ubx").glob("*.ubx"))
 

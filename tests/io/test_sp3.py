@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from overbound.io.gpstime import PLAUSIBLE_END
 from overbound.io.schema import InputError
 from overbound.io.sp3 import interpolate_clock, interpolate_position, read_sp3
 
@@ -215,3 +216,151 @@ def test_clock_query_just_before_an_epoch_is_interpolated_not_nan():
     c0, c1 = sp.clock[9, col], sp.clock[10, col]
     dt = (sp.time[10] - sp.time[9]) / 1e6
     assert before == pytest.approx(c1 + (c0 - c1) * 0.07 / dt, rel=0, abs=1e-15)
+
+
+# --------------------------------------------------------------------------- issue 13: every line counted
+
+BAD = DATA / "bad"  # damaged copies (PROVENANCE.md)
+
+
+def _epoch_lines(lines: list[str]) -> list[int]:
+    return [i for i, s in enumerate(lines) if s.startswith("*")]
+
+
+def test_a_changed_epoch_hour_is_rejected_and_overwrites_nothing():
+    """02:30 written 00:30: its six lines are rejected at the epoch line, the real 00:30 stays."""
+    path = BAD / "sp3-hour-changed.sp3"
+    sp3, report = read_sp3(path)
+    assert (report.rows_read, report.rows_kept, report.rejected) == (72, 66, {"duplicate_epoch": 6})
+    assert report.unaccounted == 0 and report.first_bad == f"{path}:94: duplicate_epoch"
+    assert sp3.rejected["line"].to_list() == list(range(95, 101))
+    assert any("epoch lines rejected" in n and "'duplicate_epoch': 1" in n for n in report.notes)
+    whole, _ = read_sp3(IGS)
+    t = [_as_time(dt.datetime(2019, 1, 14) + dt.timedelta(minutes=15 * k)) for k in range(12) if k != 10]
+    assert sp3.time.tolist() == t  # 02:30 is missing, not 00:30
+    assert np.array_equal(sp3.position, whole.position[[k for k in range(12) if k != 10]], equal_nan=True)
+    with pytest.raises(InputError, match=r"sp3-hour-changed\.sp3:94: epoch line repeating the time"):
+        read_sp3(path, strict=True)
+
+
+@pytest.mark.parametrize(
+    ("k", "new", "reason", "dropped"),
+    [
+        (10, "*  2019  1 14  0 31  0.00000000", "epoch_out_of_order", 10),  # back, to a new time
+        (2, "*  2019  1 14  2 50  0.00000000", "epoch_out_of_order", 2),  # forward: the later epochs stay
+        (3, "*  2019  1 14  0 30  0.00000000", "duplicate_epoch", 3),  # repeated just after
+    ],
+    ids=["back", "forward", "repeat"],
+)
+def test_epoch_order_keeps_the_longest_increasing_run(tmp_path, k, new, reason, dropped):
+    lines = _lines(IGS)
+    stars = _epoch_lines(lines)
+    lines[stars[k]] = new
+    sp3, report = read_sp3(_write(tmp_path, "order.sp3", lines))
+    whole, _ = read_sp3(IGS)
+    assert report.rejected == {reason: 6} and report.unaccounted == 0
+    assert report.first_bad.endswith(f":{stars[k] + 1}: {reason}")
+    assert sp3.time.tolist() == np.delete(whole.time, dropped).tolist()
+
+
+@pytest.mark.parametrize("year", ["1979", "0000", "9999", "2200", str(PLAUSIBLE_END.year)])
+def test_epoch_years_outside_the_gnss_era_are_rejected(tmp_path, year):
+    lines = _lines(IGS)
+    stars = _epoch_lines(lines)
+    lines[stars[5]] = lines[stars[5]][:3] + year + lines[stars[5]][7:]
+    sp3, report = read_sp3(_write(tmp_path, "year.sp3", lines))
+    assert report.rejected == {"time_out_of_range": 6} and report.unaccounted == 0
+    assert len(sp3.time) == 95 and report.first_bad.endswith(f":{stars[5] + 1}: time_out_of_range")
+    with pytest.raises(InputError, match=r"epoch outside 1980-01-06 to"):
+        read_sp3(_write(tmp_path, "year.sp3", lines), strict=True)
+
+
+def test_a_non_finite_position_is_counted_as_invalidated():
+    path = BAD / "sp3-inf-position.sp3"
+    sp3, report = read_sp3(path)
+    assert (report.rows_read, report.rows_kept, report.rejected) == (72, 72, {})
+    assert report.invalidated == {"missing_clock": 3, "non_finite_position": 1}
+    assert report.first_bad == f"{path}:54: non_finite_position"
+    i, j = 4, sp3.sat_index(["G07"])[0]  # 01:00, G07
+    assert np.isnan(sp3.position[i, j]).all() and np.isfinite(sp3.clock[i, j])
+    assert np.isfinite(np.delete(sp3.position.reshape(-1, 3), i * 6 + j, axis=0)).all()
+
+
+def test_non_finite_and_unreadable_values(tmp_path):
+    lines = _lines(IGS)
+    stars = _epoch_lines(lines)
+    p = [stars[k] + 2 for k in range(1, 6)]  # G07 of epochs 1-5
+    lines[p[0]] = lines[p[0]][:46] + "NaN".rjust(14) + lines[p[0]][60:]  # clock
+    lines[p[1]] = lines[p[1]][:18] + "-1e300".rjust(14) + lines[p[1]][32:]  # y: 1e303 m
+    lines[p[2]] = lines[p[2]][:46] + "  52.1OOOOO" + lines[p[2]][57:]  # unreadable clock
+    lines[p[3]] = lines[p[3]][:32] + "1e308".rjust(14) + lines[p[3]][46:]  # z overflows to inf
+    lines[p[4]] = lines[p[4]][:4] + "  1234.5678\x0090" + lines[p[4]][18:]  # a NUL byte in x
+    sp3, report = read_sp3(_write(tmp_path, "values.sp3", lines))
+    assert report.rejected == {"bad_record": 1} and report.unaccounted == 0
+    assert report.invalidated == {
+        "bad_clock": 1,
+        "implausible_position": 1,
+        "missing_clock": 40,
+        "non_finite_clock": 1,
+        "non_finite_position": 1,
+    }
+    j = sp3.sat_index(["G07"])[0]
+    assert np.isnan(sp3.clock[[1, 3], j]).all() and np.isnan(sp3.position[[2, 4, 5], j]).all()
+
+
+def test_every_line_is_kept_or_rejected_once(tmp_path):
+    lines = _lines(IGS)
+    stars = _epoch_lines(lines)
+    lines[stars[3] + 1] = "PG31" + lines[stars[3] + 1][4:]  # unlisted, in an epoch later rejected
+    lines[stars[3]] = "*  2019  1 14 25 45  0.00000000"  # hour 25: unreadable
+    lines.insert(stars[0], "PG07  1.0 2.0 3.0")  # before the first epoch
+    lines.insert(stars[8] + 3, "XG07 garbage")  # a line of no SP3 record type
+    lines.insert(stars[8] + 3, lines[stars[8] + 2])  # a satellite repeated in its epoch
+    sp3, report = read_sp3(_write(tmp_path, "lines.sp3", lines))
+    assert report.rejected == {"bad_epoch": 6, "no_epoch": 1, "duplicate": 1, "unknown_line": 1}
+    assert report.rows_read == 576 + 3 and report.rows_kept == 570 and report.unaccounted == 0
+    assert sp3.rejected.height == report.n_rejected and len(sp3.time) == 95
+    assert report.first_bad.endswith(f":{stars[0] + 1}: no_epoch")
+
+
+def test_overlapping_files_keep_the_first_and_count_the_rest(tmp_path):
+    lines = _lines(IGS)
+    stars = _epoch_lines(lines)
+    head = lines[: stars[0]]
+    first = _write(tmp_path, "a.sp3", head + lines[stars[0] : stars[50]] + ["EOF"])
+    later = lines[stars[48] :]
+    later[1] = later[1][:4] + f"{1.0:14.6f}" + later[1][18:]  # 12:00 G04 differs in the second file
+    second = _write(tmp_path, "b.sp3", head + later)
+    whole, _ = read_sp3(IGS)
+    merged, report = read_sp3([first, second])
+    assert np.array_equal(merged.position, whole.position, equal_nan=True)  # the first file's 12:00
+    assert report.rejected == {"epoch_in_earlier_file": 12} and report.unaccounted == 0
+    assert (report.rows_read, report.rows_kept) == (576 + 12, 576)
+    assert report.invalidated == read_sp3(IGS)[1].invalidated  # the dropped lines are not counted twice
+    assert set(merged.rejected["file"]) == {str(second)}
+    assert merged.rejected["line"].to_list() == [len(head) + 2 + k for k in (*range(6), *range(7, 13))]
+    read_sp3([first, second], strict=True)  # the documented rule, not an error
+
+
+def test_velocities_of_one_file_survive_the_merge(tmp_path):
+    lines = _lines(IGS)
+    stars = _epoch_lines(lines)
+    head = lines[: stars[0]]
+    part = lines[stars[0] : stars[48]]
+    part.insert(2, "VG04  12345.678901 -23456.789012   3456.789012      0.123456")
+    a = _write(tmp_path, "a.sp3", head + part)
+    b = _write(tmp_path, "b.sp3", head + lines[stars[48] :])
+    merged, report = read_sp3([b, a])
+    assert merged.velocity is not None and merged.velocity[0, 0, 0] == 1234.5678901
+    assert report.rows_read == 577 == report.rows_kept
+
+
+def test_too_few_epochs_to_interpolate_names_the_file(tmp_path):
+    lines = _lines(IGS)
+    path = _write(tmp_path, "short.sp3", lines[: _epoch_lines(lines)[5]])
+    sp3, report = read_sp3(path)
+    assert len(sp3.time) == 5 and report.unaccounted == 0
+    with pytest.raises(InputError, match=r"short\.sp3: 5 SP3 epochs, too few .* degree 10 needs 11"):
+        interpolate_position(sp3, "G07", sp3.time[2])
+    one = dataclasses.replace(sp3, time=sp3.time[:1], clock=sp3.clock[:1])
+    assert np.isnan(interpolate_clock(one, "G07", sp3.time[0]))

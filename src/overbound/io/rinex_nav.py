@@ -19,10 +19,16 @@ clock, in SI units as RINEX gives them (s, m, rad, rad/s): ``sat``, ``prn``, ``t
 s of ``week``), ``fit_interval`` (hours as written; 0 means unknown, i.e. 4 h), then
 ``toe_time`` and ``ttx_time`` (GPST datetimes of ``toe`` and ``ttx``), ``file`` and ``line``.
 
-Repeated records (same PRN, toc, IODE and IODC, as merged daily files often contain) keep
-the first and are counted as ``duplicate``; a record with fewer or more than eight lines, an
-unreadable number or epoch, or an impossible orbit (``sqrt_a`` <= 0, ``e`` outside [0, 1)) is
-rejected with file and line.
+Each GPS record (and each record of no known system, e.g. a damaged identifier) counts once as
+read, and is either kept or rejected once, with file, line and the first reason that applies:
+``unknown_system``, ``record_length`` (not eight lines), ``bad_epoch`` (unreadable PRN or toc),
+``time_out_of_range`` (toc or toe outside :data:`overbound.io.gpstime.PLAUSIBLE_SPAN`, or a
+transmission time beyond 1e10 s), ``line_too_long`` (a field overflowing its 19 columns),
+``bad_number`` (unreadable, ``NaN``/``Infinity``, a NUL byte, or an integer field beyond 32
+bits), ``missing_field``, ``implausible_orbit`` (``sqrt_a`` <= 0, ``e`` outside [0, 1)),
+``toc_toe_mismatch`` (toc and toe more than a week apart: a corrupted year or week), then
+``duplicate``: repeated records (same PRN, toc, IODE and IODC, as merged daily files often
+contain) keep the first. Records of the other systems are counted in the notes, not read.
 
 Orbit and clock
 ---------------
@@ -45,15 +51,18 @@ import polars as pl
 
 from overbound.io._rinex import (
     GPS_EPOCH_US,
+    PLAUSIBLE_END_US,
     US,
     Lines,
     civil_to_us,
     load_bytes,
     parse_digits,
     parse_float,
+    plausible_gpst,
     rinex_version,
     to_gpst,
 )
+from overbound.io.gpstime import PLAUSIBLE_SPAN, PLAUSIBLE_YEARS
 from overbound.io.open import Source, source_name
 from overbound.io.schema import InputError, ReadReport
 from overbound.sbas.frames import REJECTED_SCHEMA
@@ -105,14 +114,27 @@ _REQUIRED = (
     "iodc", "ttx",
 )  # fmt: skip
 _LINES_GPS = 8
+#: RINEX 3 system letters of the records that are counted but not read (GPS ones are read).
+_OTHER_SYSTEMS = b"RECJIS"
 _REASONS_TEXT = {
+    "unknown_system": "record of no RINEX satellite system",
     "record_length": "GPS record without exactly 8 lines",
     "bad_epoch": "unreadable PRN or time of clock",
-    "bad_number": "unreadable number",
+    "time_out_of_range": f"time of clock, of ephemeris or of transmission outside {PLAUSIBLE_SPAN}",
+    "line_too_long": "record line longer than 80 columns (a field overflows its columns)",
+    "bad_number": "unreadable or non-finite number, or an integer field out of range",
     "missing_field": "blank orbit or clock field",
     "implausible_orbit": "sqrt(A) <= 0 or eccentricity outside [0, 1)",
+    "toc_toe_mismatch": "time of clock and time of ephemeris more than a week apart",
     "duplicate": "same PRN, toc, IODE and IODC as an earlier record",
 }
+#: Seconds of GPS time from 1980-01-06 to :data:`overbound.io.gpstime.PLAUSIBLE_END`.
+_SPAN_S = (PLAUSIBLE_END_US - GPS_EPOCH_US) / US
+_TTX_LIMIT_S = 1e10  # |ttx| beyond this (s of week) is no time (0.9999e9 means "unknown" in RINEX 3)
+#: toc and toe of one data set lie within its fit interval (hours; they are usually equal): a week
+#: apart, one of them is corrupted (a changed year or week).
+_TOC_TOE_LIMIT_S = 7 * 86_400.0
+_MAX_COLUMNS = 80  # RINEX 2 records are 79 columns wide, RINEX 3 ones 80
 
 
 @dataclass(frozen=True, slots=True)
@@ -176,8 +198,8 @@ def read_rinex_nav(
     Returns
     -------
     eph : :class:`GpsEphemerides` (the header is the first file's).
-    report : ``rows_read`` GPS records seen, ``rows_kept``, ``rejected`` by reason, and in the
-        notes the records of other systems.
+    report : ``rows_read`` GPS records (and records of no known system) seen, ``rows_kept``,
+        ``rejected`` by reason (each record once), and in the notes the records of other systems.
 
     Raises
     ------
@@ -205,7 +227,8 @@ def read_rinex_nav(
 
 
 def _read_one(source: Source, strict: bool) -> tuple[pl.DataFrame, NavHeader, Counter, pl.DataFrame, int]:
-    """GPS records, header, other systems' record counts, rejections and GPS records seen of one file."""
+    """GPS records, header, other systems' record counts, rejections and records seen (GPS records and
+    records of no known system) of one file."""
     name = source_name(source)
     lines = Lines.of(load_bytes(source))
     header, body = _parse_header(lines, name)
@@ -213,21 +236,21 @@ def _read_one(source: Source, strict: bool) -> tuple[pl.DataFrame, NavHeader, Co
     rows = np.arange(body, len(lines), dtype=np.int64)
     starts = rows[(lines.chars(rows, 0, 3) != ord(" ")).any(axis=1)]
     system = lines.col(starts, 0) if v3 else np.full(len(starts), ord("G"), np.uint8)
-    others = Counter(chr(c) for c in system[system != ord("G")].tolist())
-    gps = np.flatnonzero(system == ord("G"))
-    rej: list[tuple[int, str]] = []
+    known = np.isin(system, np.frombuffer(_OTHER_SYSTEMS, np.uint8))
+    others = Counter(chr(c) for c in system[known].tolist())
+    gps = system == ord("G")
+    rej: list[tuple[int, str]] = [(int(i), "unknown_system") for i in starts[~gps & ~known]]
     nonblank = np.flatnonzero(lines.length > 0)
     ends = _record_ends(starts, nonblank, len(lines))[gps]
     first = starts[gps]
     good_len = (ends - first) == _LINES_GPS
     rej += [(int(i), "record_length") for i in first[~good_len]]
     first = first[good_len]
-    table, bad = _decode_records(lines, first, v3)
-    for reason, mask in bad.items():
-        rej += [(int(i), reason) for i in first[mask]]
-    keep = ~np.logical_or.reduce(list(bad.values())) if bad else np.ones(len(first), bool)
-    table = table.filter(pl.Series(keep)).with_columns(
-        pl.lit(name).alias("file"), pl.Series("line", first[keep] + 1)
+    table, reason = _decode_records(lines, first, v3)
+    bad = reason != ""
+    rej += [(int(i), str(r)) for i, r in zip(first[bad].tolist(), reason[bad].tolist(), strict=True)]
+    table = table.filter(pl.Series(~bad)).with_columns(
+        pl.lit(name).alias("file"), pl.Series("line", first[~bad] + 1)
     )
     rej.sort()
     if strict and rej:
@@ -236,7 +259,7 @@ def _read_one(source: Source, strict: bool) -> tuple[pl.DataFrame, NavHeader, Co
         {"file": [name] * len(rej), "line": [i + 1 for i, _ in rej], "reason": [r for _, r in rej]},
         schema=REJECTED_SCHEMA,
     )
-    return table, header, others, rejected, len(gps)
+    return table, header, others, rejected, int(np.count_nonzero(gps | ~known))
 
 
 def _record_ends(starts: np.ndarray, nonblank: np.ndarray, n: int) -> np.ndarray:
@@ -295,8 +318,9 @@ def _header_line(label: str, body: str, out: dict) -> None:
 # --------------------------------------------------------------------------- records
 
 
-def _decode_records(lines: Lines, first: np.ndarray, v3: bool) -> tuple[pl.DataFrame, dict[str, np.ndarray]]:
-    """All numbers of the GPS records at once, as a table; also the rejection masks."""
+def _decode_records(lines: Lines, first: np.ndarray, v3: bool) -> tuple[pl.DataFrame, np.ndarray]:
+    """All numbers of the GPS records at once, as a table; also each record's rejection reason
+    (``""`` when kept; the first that applies, in the order of :data:`_REASONS_TEXT`)."""
     n = len(first)
     c0, step = (23, 4) if v3 else (22, 3)
     # (line offset, column) of the 3 + 7 x 4 = 31 numbers, the last two being spares.
@@ -306,23 +330,40 @@ def _decode_records(lines: Lines, first: np.ndarray, v3: bool) -> tuple[pl.DataF
     spots = spots[: len(FIELDS)]
     line = (first[:, None] + np.array([r for r, _ in spots])[None, :]).ravel()
     col = np.tile(np.array([c for _, c in spots]), n)
-    values, ok, blank = parse_float(lines.chars(line, col, 19))
+    mat = lines.chars(line, col, 19)
+    values, ok, blank = parse_float(mat)
+    ok &= _printable(mat)  # numpy's cast would drop a trailing NUL byte
     values = values.reshape(n, len(FIELDS))
-    ok = ok.reshape(n, len(FIELDS))
+    ok = ok.reshape(n, len(FIELDS)) & (np.isfinite(values) | blank.reshape(n, len(FIELDS)))
     blank = blank.reshape(n, len(FIELDS))
-    prn, toc, epoch_ok = _record_epochs(lines, first, v3)
-    cols = {f: values[:, k] for k, f in enumerate(FIELDS)}
+    integer = np.array([f in _INTEGER for f in FIELDS])
+    ok &= ~(integer[None, :] & ~(np.abs(values) < 2**31) & ~blank)  # fits the int32 column
+    prn, toc, epoch_ok, toc_in_span = _record_epochs(lines, first, v3)
+    cols = {f: np.where(ok[:, k], values[:, k], np.nan) for k, f in enumerate(FIELDS)}
     required = np.array([f in _REQUIRED for f in FIELDS])
-    bad = {
+    week = np.nan_to_num(cols["week"])
+    toe_s = week * 604_800.0 + np.nan_to_num(cols["toe"])  # s since the GPS epoch
+    ttx = np.nan_to_num(cols["ttx"])
+    times_ok = (toe_s >= 0) & (toe_s < _SPAN_S) & (np.abs(ttx) < _TTX_LIMIT_S) & toc_in_span
+    toc_s = (toc - GPS_EPOCH_US) / US
+    longest = lines.length[first[:, None] + np.arange(_LINES_GPS)].max(axis=1)
+    checks = {
         "bad_epoch": ~epoch_ok,
+        "time_out_of_range": ~times_ok,
+        "line_too_long": longest > _MAX_COLUMNS,
         "bad_number": ~ok.all(axis=1),
         "missing_field": (blank & required[None, :]).any(axis=1),
+        "implausible_orbit": ~(cols["sqrt_a"] > 0) | ~((cols["e"] >= 0) & (cols["e"] < 1)),
+        "toc_toe_mismatch": ~(np.abs(toc_s - toe_s) <= _TOC_TOE_LIMIT_S),
     }
-    bad["implausible_orbit"] = ~(cols["sqrt_a"] > 0) | ~((cols["e"] >= 0) & (cols["e"] < 1))
-    bad["implausible_orbit"] &= ~bad["missing_field"] & ~bad["bad_number"]
-    week = np.nan_to_num(cols["week"]).astype(np.int64)
-    toe_us = GPS_EPOCH_US + week * _WEEK_US + np.round(np.nan_to_num(cols["toe"]) * US).astype(np.int64)
-    ttx_us = GPS_EPOCH_US + week * _WEEK_US + np.round(np.nan_to_num(cols["ttx"]) * US).astype(np.int64)
+    reason = np.full(n, "", dtype=object)
+    for name, mask in checks.items():  # each record once, with the first reason that applies
+        reason[(reason == "") & mask] = name
+    # the times of the rejected records are not computed (they may overflow): they are dropped
+    kept = reason == ""
+    week_us = np.where(kept, week, 0).astype(np.int64) * _WEEK_US
+    toe_us = GPS_EPOCH_US + week_us + np.round(np.where(kept, cols["toe"], 0) * US).astype(np.int64)
+    ttx_us = GPS_EPOCH_US + week_us + np.round(np.where(kept, ttx, 0) * US).astype(np.int64)
     data: dict[str, pl.Series] = {
         "sat": pl.Series("sat", [f"G{p:02d}" for p in prn.tolist()], dtype=pl.String),
         "prn": pl.Series("prn", prn.astype(np.int16)),
@@ -335,26 +376,33 @@ def _decode_records(lines: Lines, first: np.ndarray, v3: bool) -> tuple[pl.DataF
             data[f] = pl.Series(f, cols[f])
     data["toe_time"] = pl.Series("toe_time", toe_us, dtype=pl.Int64).cast(pl.Datetime("us"))
     data["ttx_time"] = pl.Series("ttx_time", ttx_us, dtype=pl.Int64).cast(pl.Datetime("us"))
-    return pl.DataFrame(list(data.values())), bad
+    return pl.DataFrame(list(data.values())), reason
 
 
-def _record_epochs(lines: Lines, first: np.ndarray, v3: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """PRN, time of clock (GPS microseconds) and whether both read."""
+def _record_epochs(
+    lines: Lines, first: np.ndarray, v3: bool
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """PRN, time of clock (GPS microseconds), whether both read, and whether the time lies in
+    :data:`overbound.io.gpstime.PLAUSIBLE_SPAN`."""
     if v3:  # A1, I2.2, 1X, I4, 5(1X, I2.2): seconds are whole
-        prn, p_ok, _ = parse_digits(lines.chars(first, 1, 2))
-        year, y_ok, _ = parse_digits(lines.chars(first, 4, 4))
-        parts = [parse_digits(lines.chars(first, c, 2)) for c in (9, 12, 15, 18, 21)]
+        prn, p_ok, _ = _digits(lines.chars(first, 1, 2))
+        year, y_ok, _ = _digits(lines.chars(first, 4, 4))
+        parts = [_digits(lines.chars(first, c, 2)) for c in (9, 12, 15, 18, 21)]
         sec_us = parts[4][0] * US
         sec_ok = parts[4][1]
         parts = parts[:4]
     else:  # I2, 1X, I2.2, 4(1X, I2), F5.1
-        prn, p_ok, _ = parse_digits(lines.chars(first, 0, 2))
-        year, y_ok, _ = parse_digits(lines.chars(first, 3, 2))
+        prn, p_ok, _ = _digits(lines.chars(first, 0, 2))
+        year, y_ok, _ = _digits(lines.chars(first, 3, 2))
         year = np.where(year < 80, 2000 + year, 1900 + year)
-        parts = [parse_digits(lines.chars(first, c, 2)) for c in (6, 9, 12, 15)]
-        sec, sec_ok, _ = parse_float(lines.chars(first, 17, 5))
-        sec_us = np.round(np.nan_to_num(sec) * US).astype(np.int64)
-    t, date_ok = civil_to_us(year, *(p[0] for p in parts), sec_us)
+        parts = [_digits(lines.chars(first, c, 2)) for c in (6, 9, 12, 15)]
+        sec_mat = lines.chars(first, 17, 5)
+        sec, sec_ok, _ = parse_float(sec_mat)
+        sec_ok &= _printable(sec_mat) & np.isfinite(sec) & (np.abs(sec) < 100)
+        sec_us = np.round(np.where(sec_ok, sec, 0) * US).astype(np.int64)
+    # the date's validity with the year brought into civil_to_us's range, the span checked apart
+    _, date_ok = civil_to_us(np.clip(year, 1980, 2199), *(p[0] for p in parts), sec_us)
+    t, _ = civil_to_us(year, *(p[0] for p in parts), sec_us)
     ok = (
         p_ok
         & (prn >= 1)
@@ -364,7 +412,19 @@ def _record_epochs(lines: Lines, first: np.ndarray, v3: bool) -> tuple[np.ndarra
         & date_ok
         & np.logical_and.reduce([p[1] for p in parts])
     )
-    return prn, to_gpst(t, "GPS", ""), ok
+    t = to_gpst(t, "GPS", "")
+    return prn, t, ok, np.isin(year, PLAUSIBLE_YEARS) & plausible_gpst(t)
+
+
+def _digits(mat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`~overbound.io._rinex.parse_digits` of a date field, where a blank is no value (not 0)."""
+    value, ok, blank = parse_digits(mat)
+    return value, ok & ~blank, blank
+
+
+def _printable(mat: np.ndarray) -> np.ndarray:
+    """Rows of a byte matrix that hold printable ASCII only."""
+    return ((mat >= 32) & (mat <= 126)).all(axis=1)
 
 
 def _drop_duplicates(table: pl.DataFrame) -> tuple[pl.DataFrame, pl.DataFrame]:
