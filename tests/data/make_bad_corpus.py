@@ -96,6 +96,16 @@ def table() -> None:
     meta[key] = ord("0")  # the provenance JSON loses a quote: the footer still parses
     put(bad / "parquet-provenance-not-json.parquet", bytes(meta))
     put(bad / "parquet-cut-in-half.parquet", data[: len(data) // 2])
+    # a time whose bits were hit: beyond any calendar (polars panicked formatting it)
+    import polars as pl
+
+    frame = pl.read_parquet(data)[:20]
+    us = frame["time"].cast(pl.Datetime("us")).to_physical().to_list()
+    us[7] = 2**63 - 12345
+    frame = frame.with_columns(pl.Series("time", us, dtype=pl.Int64).cast(pl.Datetime("us")))
+    out = io.BytesIO()
+    frame.write_parquet(out)
+    put(bad / "parquet-time-beyond-calendar.parquet", out.getvalue())
     csv = b"time,station,hpe,vpe,hpl,vpl\n" + b"".join(
         f"2024-01-07T00:00:{s:02d},SIM,1.0,1.5,10.0,15.0\n".encode() for s in range(40)
     )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import datetime as dt
 from collections import Counter
 from dataclasses import dataclass, field
 
@@ -95,16 +96,34 @@ def finalize_epochs(
 
 
 def _drop_implausible_times(df: pl.DataFrame, log: RowLog) -> pl.DataFrame:
-    t = pl.col("time").cast(pl.Datetime("us"))
-    bad = t.is_null() | (t < GPS_EPOCH) | (t >= PLAUSIBLE_END)
-    # the time as text by polars: a Python datetime cannot hold year 0
-    out = df.filter(bad).select("_line", t.dt.to_string("%Y-%m-%d %H:%M:%S%.f").alias("time"))
-    if not out.height:
+    # Compared as integers (microseconds since 1970): a corrupted time can lie beyond what
+    # polars' calendar code formats (it panics) or a Python datetime holds (year 0).
+    us = df["time"].cast(pl.Datetime("us")).to_physical()
+    lo, hi = (int((x - _UNIX).total_seconds()) * 1_000_000 for x in (GPS_EPOCH, PLAUSIBLE_END))
+    bad = us.is_null() | (us < lo) | (us >= hi)
+    n_bad = int(bad.sum())
+    if not n_bad:
         return df
-    line, time = out.row(0)
-    log.reject(line, f"time out of range: {time} outside {PLAUSIBLE_SPAN}")
-    log.rejected["time_out_of_range"] += out.height - 1
+    i = int(bad.arg_true()[0])
+    log.reject(int(df["_line"][i]), f"time out of range: {_format_us(us[i])} outside {PLAUSIBLE_SPAN}")
+    log.rejected["time_out_of_range"] += n_bad - 1
     return df.filter(~bad)
+
+
+_UNIX = dt.datetime(1970, 1, 1)
+
+
+def _format_us(us: int | None) -> str:
+    """A time given as microseconds since 1970 as text, whatever its year."""
+    if us is None:
+        return "missing"
+    try:
+        return str(_UNIX + dt.timedelta(microseconds=us))
+    except OverflowError:  # beyond years 1-9999: polars' calendar, inside the range it handles
+        if abs(us) < 7 * 10**18:  # about 220,000 years
+            t = pl.Series([us], dtype=pl.Int64).cast(pl.Datetime("us"))
+            return str(t.dt.to_string("%Y-%m-%d %H:%M:%S%.f")[0])
+        return f"{us} µs from 1970-01-01"
 
 
 def _drop_duplicates_or_raise(df: pl.DataFrame, log: RowLog) -> pl.DataFrame:
