@@ -305,13 +305,21 @@ def m_truncate(data: bytes, rng: Rng, seed: Seed) -> tuple[bytes, str]:
     return data[:pos], f"cut at byte {pos} of {len(data)}"
 
 
-def m_byte_flip(data: bytes, rng: Rng, seed: Seed) -> tuple[bytes, str]:
+def _flip(
+    data: bytes, rng: Rng, most: int, lo: int, hi: int, *, bits: bool = False
+) -> tuple[bytes, list[int]]:
+    """1 to ``most`` bytes of ``data[lo:hi]`` XOR-ed with a random byte (``bits``: one random bit each)."""
     buf = bytearray(data)
-    k = _int(rng, 1, 9)
-    pos = sorted(_int(rng, 0, len(buf)) for _ in range(k))
+    k = _int(rng, 1, most + 1)
+    pos = sorted(_int(rng, lo, hi) for _ in range(k))
     for p in pos:
-        buf[p] ^= _int(rng, 1, 256)
-    return bytes(buf), f"{k} byte(s) flipped at {pos}"
+        buf[p] ^= (1 << _int(rng, 0, 8)) if bits else _int(rng, 1, 256)
+    return bytes(buf), pos
+
+
+def m_byte_flip(data: bytes, rng: Rng, seed: Seed) -> tuple[bytes, str]:
+    out, pos = _flip(data, rng, 8, 0, len(data))
+    return out, f"{len(pos)} byte(s) flipped at {pos}"
 
 
 def m_byte_insert(data: bytes, rng: Rng, seed: Seed) -> tuple[bytes, str]:
@@ -492,12 +500,9 @@ def m_gzip_truncated(data: bytes, rng: Rng, seed: Seed) -> tuple[bytes, str]:
 
 
 def m_gzip_flip(data: bytes, rng: Rng, seed: Seed) -> tuple[bytes, str]:
-    z = bytearray(_gz(data))
-    k = _int(rng, 1, 5)
-    pos = sorted(_int(rng, 10, len(z)) for _ in range(k))
-    for p in pos:
-        z[p] ^= _int(rng, 1, 256)
-    return bytes(z), f"gzip of {len(z)} bytes, {k} byte(s) flipped at {pos}"
+    z = _gz(data)
+    out, pos = _flip(z, rng, 4, 10, len(z))
+    return out, f"gzip of {len(z)} bytes, {len(pos)} byte(s) flipped at {pos}"
 
 
 def m_gzip_header_only(data: bytes, rng: Rng, seed: Seed) -> tuple[bytes, str]:
@@ -512,22 +517,14 @@ def _footer(data: bytes) -> tuple[int, int]:
 
 def m_parquet_flip_data(data: bytes, rng: Rng, seed: Seed) -> tuple[bytes, str]:
     start, _ = _footer(data)
-    buf = bytearray(data)
-    k = _int(rng, 1, 5)
-    pos = sorted(_int(rng, 4, start) for _ in range(k))
-    for p in pos:
-        buf[p] ^= 1 << _int(rng, 0, 8)
-    return bytes(buf), f"{k} bit(s) flipped in the data pages at {pos} (footer at {start})"
+    out, pos = _flip(data, rng, 4, 4, start, bits=True)
+    return out, f"{len(pos)} bit(s) flipped in the data pages at {pos} (footer at {start})"
 
 
 def m_parquet_flip_footer(data: bytes, rng: Rng, seed: Seed) -> tuple[bytes, str]:
     start, end = _footer(data)
-    buf = bytearray(data)
-    k = _int(rng, 1, 3)
-    pos = sorted(_int(rng, start, end) for _ in range(k))
-    for p in pos:
-        buf[p] ^= 1 << _int(rng, 0, 8)
-    return bytes(buf), f"{k} bit(s) flipped in the footer [{start}, {end}) at {pos}"
+    out, pos = _flip(data, rng, 2, start, end, bits=True)
+    return out, f"{len(pos)} bit(s) flipped in the footer [{start}, {end}) at {pos}"
 
 
 def m_parquet_meta_json(data: bytes, rng: Rng, seed: Seed) -> tuple[bytes, str]:
