@@ -98,6 +98,72 @@ def test_leftovers_of_a_killed_run_are_removed(tmp_path: Path) -> None:
     assert _leftovers(target) == []
 
 
+def test_directories_merge_file_by_file(tmp_path: Path) -> None:
+    """Review of issue 13: a user's file inside a directory that the run also writes survived
+    nowhere (the whole directory was replaced)."""
+    target = tmp_path / "out"
+    (target / "uslo").mkdir(parents=True)
+    (target / "uslo" / "notes.txt").write_text("mine")
+    (target / "empty").mkdir()
+    with staged_directory(target, command="demo") as stage:
+        (stage.path / "uslo").mkdir()
+        (stage.path / "uslo" / "summary.json").write_text("1")
+        (stage.path / "uslo" / "old.json").write_text("1")
+    with staged_directory(target, command="demo") as stage:
+        (stage.path / "uslo").mkdir()
+        (stage.path / "uslo" / "summary.json").write_text("2")
+    assert (target / "uslo" / "notes.txt").read_text() == "mine" and (target / "empty").is_dir()
+    assert (target / "uslo" / "summary.json").read_text() == "2"
+    assert stage.removed == ["uslo/old.json"] and stage.kept == ["empty", "uslo/notes.txt"]
+
+
+def test_a_symlinked_target_is_written_through(tmp_path: Path) -> None:
+    real = tmp_path / "real"
+    real.mkdir()
+    (tmp_path / "link").symlink_to(real)
+    with staged_directory(tmp_path / "link", command="analyze") as stage:
+        (stage.path / "summary.json").write_text("new")
+    assert (tmp_path / "link").is_symlink() and (real / "summary.json").read_text() == "new"
+    assert _leftovers(real) == [] and _leftovers(tmp_path / "link") == []
+
+
+def test_leftover_names_are_matched_exactly(tmp_path: Path) -> None:
+    """A user's ``.out.old-backup`` and another target's staging (``a*`` globbing) are not ours."""
+    (tmp_path / ".out.old-backup").write_text("user")
+    (tmp_path / ".aXb.staging-7").mkdir()
+    with staged_directory(tmp_path / "out", command="analyze") as stage:
+        (stage.path / "summary.json").write_text("new")
+    with staged_directory(tmp_path / "a*", command="analyze") as stage:
+        (stage.path / "summary.json").write_text("new")
+    assert (tmp_path / ".out.old-backup").exists() and (tmp_path / ".aXb.staging-7").exists()
+
+
+def test_a_swap_killed_between_its_renames_is_repaired(tmp_path: Path) -> None:
+    """Without an atomic exchange the swap is two renames; a kill between them leaves the
+    previous set aside and no target. The next run puts it back before anything else."""
+    aside = tmp_path / ".out.old-4242"
+    aside.mkdir()
+    (aside / "notes.txt").write_text("mine")
+    (tmp_path / ".out.staging-4242").mkdir()
+    with staged_directory(tmp_path / "out", command="analyze") as stage:
+        (stage.path / "summary.json").write_text("new")
+    assert (tmp_path / "out" / "notes.txt").read_text() == "mine" and stage.kept == ["notes.txt"]
+    assert _leftovers(tmp_path / "out") == []
+
+
+def test_epochs_inside_the_output_are_one_of_its_files(tmp_path: Path) -> None:
+    out = tmp_path / "out"
+    res = CliRunner().invoke(
+        main,
+        ["analyze", str(POS), "--reference", USLO_REFERENCE, "--no-evt", "--no-parametric", "--no-confidence",
+         "-o", str(out), "--epochs", str(out / "tables" / "epochs.parquet")],
+    )  # fmt: skip
+    assert res.exit_code == 0, res.output
+    assert "kept in" not in res.output
+    manifest = json.loads((out / MANIFEST).read_text())["files"]["analyze"]
+    assert manifest == ["report.html", "summary.json", "tables/epochs.parquet"]
+
+
 @pytest.mark.parametrize(
     "make, message",
     [
@@ -245,3 +311,15 @@ def test_a_second_analyze_into_a_directory_in_use_stops_at_once(tmp_path: Path) 
         res = CliRunner().invoke(main, ["analyze", str(POS), "--reference", USLO_REFERENCE, "-o", str(out)])
     assert res.exit_code == 2
     assert res.output == f"error: {out}: in use by another overbound run (lock .out.lock); wait for it\n"
+
+
+def test_the_two_rename_fallback_gives_the_same_result(tmp_path: Path, monkeypatch) -> None:
+    """macOS, Windows and file systems without RENAME_EXCHANGE take the two-rename path."""
+    import overbound.output
+
+    monkeypatch.setattr(overbound.output, "_exchange", lambda a, b: False)
+    target = tmp_path / "out"
+    for text in ("old", "new"):
+        with staged_directory(target, command="analyze") as stage:
+            (stage.path / "summary.json").write_text(text)
+    assert (target / "summary.json").read_text() == "new" and _leftovers(target) == []

@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import functools
 import math
+import os
 import sys
 import tempfile
 from collections.abc import Iterator
@@ -220,7 +221,7 @@ def analyze(inputs, out_dir, services, epochs_out, confidence, evt, parametric, 
     read_options = _read_options(**inputs_opts)
     with contextlib.ExitStack() as outputs:  # both checked (and locked) before the analysis
         stage = outputs.enter_context(_staged(out_dir, "analyze"))
-        epochs_path = outputs.enter_context(staged_files(epochs_out)) if epochs_out else None
+        epochs_path = _epochs_path(epochs_out, stage, outputs) if epochs_out else None
         paths = _run_analysis(
             list(inputs),
             stage.path,
@@ -233,6 +234,15 @@ def analyze(inputs, out_dir, services, epochs_out, confidence, evt, parametric, 
         )
     click.echo(f"report: {stage.final(paths[1])}")
     click.echo(f"summary: {stage.final(paths[0])}")
+
+
+def _epochs_path(epochs_out: Path, stage: StagedDirectory, outputs: contextlib.ExitStack) -> Path:
+    """Where ``--epochs`` is written: in the staging directory when it lies in the output
+    directory (it is then one of the run's files), else through its own staged file."""
+    real = Path(os.path.realpath(epochs_out))
+    if real.is_relative_to(stage.target):
+        return stage.path / real.relative_to(stage.target)
+    return outputs.enter_context(staged_files(epochs_out))
 
 
 def _run_analysis(
@@ -307,6 +317,7 @@ def _run_analysis(
         step("drawing report.html")
         report = write_report(result, out_dir, summary=doc, assessment=assessment)
         if epochs_out:
+            epochs_out.parent.mkdir(parents=True, exist_ok=True)
             write_epochs(result.table, epochs_out)
     _print_summary(result, assessment)
     return summary, report, assessment

@@ -34,8 +34,10 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import errno
+import glob
 import json
 import os
+import re
 import shutil
 import signal
 import stat
@@ -158,12 +160,33 @@ def _try_lock(fd: int) -> bool:
         raise
 
 
+def _leftovers(target: Path, kind: str) -> list[Path]:
+    """``.NAME.<kind>-<pid>`` beside ``target`` (exactly: a user's ``.NAME.old-backup`` is not ours)."""
+    pattern = re.compile(rf"\.{re.escape(target.name)}\.{kind}-\d+")
+    return sorted(
+        p for p in target.parent.glob(f".{glob.escape(target.name)}.{kind}-*") if pattern.fullmatch(p.name)
+    )
+
+
 def _remove_leftovers(target: Path) -> None:
-    """Staging and old directories of killed runs (we hold the lock: no live run owns them)."""
-    for p in target.parent.glob(f".{target.name}.staging-*"):
-        shutil.rmtree(p, ignore_errors=True)
-    for p in target.parent.glob(f".{target.name}.old-*"):
-        shutil.rmtree(p, ignore_errors=True)
+    """Staging and old directories of killed runs (we hold the lock: no live run owns them).
+
+    A run killed inside the two-rename swap (systems without an atomic exchange) left the
+    previous set aside and no target: it is renamed back first, so nothing of it is lost.
+    """
+    old = _leftovers(target, "old")
+    if old and not os.path.lexists(target):
+        os.rename(old.pop(), target)
+    for p in [*_leftovers(target, "staging"), *old]:
+        _remove(p)
+
+
+def _remove(path: Path) -> None:
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        with contextlib.suppress(OSError):
+            path.unlink()
 
 
 def _make_staging(target: Path) -> Path:
@@ -181,6 +204,9 @@ def _make_staging(target: Path) -> Path:
 
 
 def _check_directory_target(target: Path) -> None:
+    if target.is_dir() and (os.path.ismount(target) or target.stat().st_dev != target.parent.stat().st_dev):
+        # a volume cannot be renamed: its directories can
+        raise OutputError(target, "is a mount point; give a directory inside it (e.g. -o DIR/out)")
     if target.exists() and not target.is_dir():
         raise OutputError(target, "is a file, but the output must be a directory")
     if target.exists() and not os.access(target, os.W_OK | os.X_OK):
@@ -231,7 +257,8 @@ def staged_directory(target: str | Path, *, command: str) -> Iterator[StagedDire
     OutputError
         The target cannot be written, or another run holds it.
     """
-    target = Path(os.path.abspath(target))
+    # a symlink to a directory: the directory it points to is the output (the link stays)
+    target = Path(os.path.realpath(target))
     _checked_parent(target)
     _check_directory_target(target)
     with _locked(target), _terminate_as_interrupt():
@@ -239,9 +266,12 @@ def staged_directory(target: str | Path, *, command: str) -> Iterator[StagedDire
         stage = StagedDirectory(target=target, path=_make_staging(target), command=command)
         try:
             yield stage
-            _commit(stage)
+            try:
+                _commit(stage)
+            except OSError as exc:
+                raise OutputError(target, f"cannot put the new files in place ({exc})") from None
         finally:
-            shutil.rmtree(stage.path, ignore_errors=True)
+            _remove(stage.path)
 
 
 def _written(root: Path) -> list[str]:
@@ -259,16 +289,22 @@ def _read_manifest(directory: Path) -> dict[str, list[str]]:
 
 
 def _commit(stage: StagedDirectory) -> None:
-    """Carry over what is not this command's, write the manifest, swap the directories."""
+    """Carry over what is not this command's, write the manifest, swap the directories.
+
+    File by file, directories merged: a file of the old set that the new set does not hold
+    is carried over (hard link, or copy) unless the manifest lists it as a file of an
+    earlier run of this command; then it is a stale file, removed and listed.
+    """
     target, new = stage.target, stage.path
     files = {stage.command: _written(new)}
     if target.is_dir():
         old = _read_manifest(target)
         previous = set(old.pop(stage.command, []))
-        for rel in _entries(target):
-            mine = rel in previous or rel.split("/", 1)[0] in {p.split("/", 1)[0] for p in previous}
-            if (new / rel).exists() or mine:
-                continue
+        for rel in _old_entries(target):
+            if os.path.lexists(new / rel) and not (new / rel).is_dir():
+                continue  # rewritten by this run
+            if rel in previous:
+                continue  # this command's, not written again: stale
             _carry(target / rel, new / rel)
             stage.kept.append(rel)
         stage.removed = sorted(p for p in previous if p not in files[stage.command])
@@ -280,15 +316,32 @@ def _commit(stage: StagedDirectory) -> None:
     _swap(new, target)
 
 
-def _entries(directory: Path) -> list[str]:
-    """Top-level entries of the old directory, except the manifest."""
-    return sorted(p.name for p in directory.iterdir() if p.name != MANIFEST)
+def _old_entries(directory: Path) -> list[str]:
+    """Files, symlinks and empty directories of the old set, relative, except the manifest.
+
+    Symlinked directories are entries, not walked; so are directories on another file
+    system (a mount inside the output), carried whole by :func:`_carry`.
+    """
+    out = []
+    for root, dirs, names in os.walk(directory):
+        base = Path(root)
+        for d in list(dirs):
+            p = base / d
+            if p.is_symlink() or os.path.ismount(p):
+                dirs.remove(d)
+                names.append(d)
+        rel_root = base.relative_to(directory)
+        if not dirs and not names and base != directory:
+            out.append(rel_root.as_posix())  # an empty directory: kept as one
+        out += [(rel_root / n).as_posix() for n in names if not (base == directory and n == MANIFEST)]
+    return sorted(out)
 
 
 def _carry(src: Path, dst: Path) -> None:
     """Hard-link (or copy) ``src`` into the new set: the old set stays intact until the swap."""
+    dst.parent.mkdir(parents=True, exist_ok=True)
     if src.is_dir() and not src.is_symlink():
-        shutil.copytree(src, dst, symlinks=True, copy_function=_link_or_copy)
+        shutil.copytree(src, dst, symlinks=True, copy_function=_link_or_copy, dirs_exist_ok=True)
     else:
         _link_or_copy(src, dst)
 
@@ -304,18 +357,40 @@ def _link_or_copy(src: str | Path, dst: str | Path) -> None:
 
 
 def _swap(new: Path, target: Path) -> None:
-    """Put ``new`` at ``target``; the old directory ends up at ``new``'s path (removed by the caller)."""
-    if not target.exists():
-        os.rename(new, target)
+    """Put ``new`` at ``target``; the old directory ends up at ``new``'s path (removed by the caller).
+
+    SIGINT and SIGTERM are held during the swap, so that the two-rename fallback is not cut
+    between its renames by a signal (a SIGKILL there is repaired by the next run).
+    """
+    with _signals_held():
+        if not target.exists():
+            os.rename(new, target)
+            return
+        with contextlib.suppress(OSError):
+            os.chmod(new, stat.S_IMODE(target.stat().st_mode))
+        if _exchange(new, target):
+            return
+        aside = target.parent / f".{target.name}.old-{os.getpid()}"
+        os.rename(target, aside)
+        try:
+            os.rename(new, target)
+        except OSError:
+            os.rename(aside, target)
+            raise
+        os.rename(aside, new)
+
+
+@contextlib.contextmanager
+def _signals_held() -> Iterator[None]:
+    if not hasattr(signal, "pthread_sigmask"):  # Windows
+        yield
         return
-    with contextlib.suppress(OSError):
-        os.chmod(new, stat.S_IMODE(target.stat().st_mode))
-    if _exchange(new, target):
-        return
-    aside = target.parent / f".{target.name}.old-{os.getpid()}"
-    os.rename(target, aside)
-    os.rename(new, target)
-    os.rename(aside, new)
+    held = {signal.SIGINT, signal.SIGTERM}
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
 
 
 def _exchange(a: Path, b: Path) -> bool:
