@@ -43,3 +43,22 @@ def test_a_root_finder_meeting_nan_fails_its_section_not_the_run(tmp_path: Path,
     assert 'id="confidence-vertical"' in html and "Not computed: a numerical step failed" in html
     assert not (out / "confidence-vertical.json").exists()
     assert "confidence vertical: not computed: ValueError" in res.output
+    # the verdicts say what is missing, and no PL-bounding pass rests on the absent check
+    for service in summary["verdicts"].values():
+        bounding = service["pl_bounding"]
+        assert bounding["verdict"] != "pass", bounding["sentence"]
+        missing = [e for e in bounding["evidence"] if e["quantity"] == "not computed"]
+        assert {e["axis"] for e in missing} <= {"vertical", "horizontal"} and missing
+
+
+def test_the_confidence_command_names_the_stage_that_failed(tmp_path: Path, monkeypatch) -> None:
+    brentq = optimize.brentq
+    monkeypatch.setattr(
+        confidence_stats.optimize, "brentq", lambda f, a, b, **kw: brentq(lambda x: float("nan"), a, b, **kw)
+    )
+    res = CliRunner().invoke(
+        main, ["confidence", str(POS), "--reference", USLO_REFERENCE, "-o", str(tmp_path / "out")]
+    )
+    assert res.exit_code == 2 and res.output.count("\n") == 1, res.output
+    assert res.output.startswith("error: ValueError in confidence._ideal_pl: The function value at x=")
+    assert not (tmp_path / "out").exists(), "nothing half-written"

@@ -203,7 +203,7 @@ def analyze(
 
 #: What a numerical step raises when it cannot run on an input (a root-finder meeting NaN,
 #: a singular matrix, an overflow): the method is reported as failed, the analysis goes on.
-_NUMERICAL_FAILURES = (ValueError, ArithmeticError, RuntimeError, np.linalg.LinAlgError)
+NUMERICAL_FAILURES = (ValueError, ArithmeticError, RuntimeError, np.linalg.LinAlgError)
 
 
 _PACKAGE = str(Path(__file__).parent)
@@ -213,13 +213,19 @@ def _guarded(failures: list, method: str, axis: str, run: Callable, /, *args, **
     """``run(*args, **kwargs)``, or ``None`` with ``(method, axis, reason)`` added to ``failures``."""
     try:
         return run(*args, **kwargs)
-    except _NUMERICAL_FAILURES as exc:
-        # the stage: the innermost frame of our own code (not scipy's or numpy's)
-        ours = [f for f in traceback.extract_tb(exc.__traceback__) if f.filename.startswith(_PACKAGE)]
-        where = (ours or traceback.extract_tb(exc.__traceback__))[-1]
-        stage = f"{Path(where.filename).stem}.{where.name}"
-        failures.append((method, axis, f"{type(exc).__name__} in {stage}: {exc}"))
+    except NUMERICAL_FAILURES as exc:
+        failures.append((method, axis, failure_text(exc)))
         return None
+
+
+def failure_text(exc: BaseException) -> str:
+    """``<type> in <module>.<function>: <message>``, the stage being the innermost frame of our
+    own code (not scipy's or numpy's)."""
+    frames = traceback.extract_tb(exc.__traceback__)
+    ours = [f for f in frames if f.filename.startswith(_PACKAGE)]
+    where = (ours or frames)[-1] if frames else None
+    stage = f" in {Path(where.filename).stem}.{where.name}" if where else ""
+    return f"{type(exc).__name__}{stage}: {exc}"
 
 
 def _confidence_axes(table: pl.DataFrame) -> tuple[str, ...]:

@@ -93,9 +93,27 @@ class _Group(click.Group):
     def invoke(self, ctx: click.Context):
         try:
             return super().invoke(ctx)
-        except (InputError, OutputError, ValueError) as exc:
-            console.print(f"[bold red]error:[/] {exc}", highlight=False, soft_wrap=True)
-            sys.exit(2)
+        except (InputError, OutputError) as exc:
+            _fail(str(exc))
+        except (ValueError, ArithmeticError, RuntimeError) as exc:
+            _fail(_value_error_text(exc))
+
+
+def _value_error_text(exc: BaseException) -> str:
+    """Our own messages as they are; one raised inside numpy or scipy (a root-finder meeting NaN)
+    with the stage of ours that called it, since its text names neither."""
+    import traceback
+
+    from overbound.analysis import failure_text
+
+    frames = traceback.extract_tb(exc.__traceback__)
+    ours = bool(frames) and frames[-1].filename.startswith(str(Path(__file__).parent))
+    return str(exc) if ours else failure_text(exc)
+
+
+def _fail(message: str) -> None:
+    console.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
+    sys.exit(2)
 
 
 @click.group(cls=_Group)

@@ -562,6 +562,8 @@ class _Context:
     confidence: dict[str, ConfidenceAnalysis]
     interval_s: float
     cl_cache: dict
+    #: ``(method, axis) -> reason`` of the methods that could not run (``Analysis.method_failures``)
+    failed: dict = field(default_factory=dict)
 
 
 def _tail_models(ctx: _Context, s: ServiceLevel, axis: str, hmi: bool) -> list[EvidenceItem]:
@@ -600,6 +602,11 @@ def _tail_models(ctx: _Context, s: ServiceLevel, axis: str, hmi: bool) -> list[E
     return items
 
 
+def _not_computed(method: str, axis: str | None, reason: str) -> EvidenceItem:
+    """The item of a method that could not run on this input: no figure, and why."""
+    return EvidenceItem(method, "not computed", None, None, None, "none", note=reason, axis=axis)
+
+
 def _model_vote(it: EvidenceItem, share: float) -> EvidenceItem:
     """The item with its vote: ``none`` when rejected (R4) or without an upper bound."""
     if it.adequacy is not None and it.adequacy.rejected:
@@ -630,6 +637,7 @@ def _tail_verdict(kind: str, ctx: _Context, s: ServiceLevel) -> Verdict:
         items.append(replace(it, vote="fail" if over else "none"))
         if over:
             fails.append(f"{a} {what} observed ({observed[a].epochs} {what} epochs)")
+    not_run = []  # checks that were asked for but could not run: a pass cannot rest on their absence
     if not hmi:
         for a in axes:
             cl = ctx.confidence.get(a)
@@ -638,6 +646,11 @@ def _tail_verdict(kind: str, ctx: _Context, s: ServiceLevel) -> Verdict:
                     items.append(it)
                     if it.vote == "fail":
                         fails.append(f"PL {it.note}")
+            elif ("confidence", a) in ctx.failed:
+                items.append(_not_computed("PL confidence level", a, ctx.failed["confidence", a]))
+                not_run.append(f"the PL confidence level of the {a} axis could not be computed")
+    if ("parametric", "both") in ctx.failed:
+        items.append(_not_computed("parametric", None, ctx.failed["parametric", "both"]))
     uppers, rejected, missing, model_fails = {}, [], [], []
     for a in axes:
         admissible = []
@@ -663,7 +676,7 @@ def _tail_verdict(kind: str, ctx: _Context, s: ServiceLevel) -> Verdict:
     elif model_fails and not models_pass:
         v, basis = FAIL, "admissible tail models"
         sentence = f"{'; '.join(model_fails)} exceeds {req_p:g} per exposure."
-    elif models_pass and not model_fails:
+    elif models_pass and not model_fails and not not_run:
         v, basis = PASS, " and ".join(sorted({i.method for i in uppers.values()}))
         dec = ", ".join(
             f"{a} {format_probability(i.upper, i.log10_upper)} ({i.method})" for a, i in uppers.items()
@@ -673,7 +686,8 @@ def _tail_verdict(kind: str, ctx: _Context, s: ServiceLevel) -> Verdict:
             f"together within {req_p:g}."
         )
     else:
-        v, basis = NOT_DEMONSTRATED, "tail models inconclusive"
+        basis = "a check could not run" if models_pass and not model_fails else "tail models inconclusive"
+        v = NOT_DEMONSTRATED
         why = []
         if model_fails:
             why.append("the admissible models disagree (" + "; ".join(model_fails) + ")")
@@ -683,6 +697,7 @@ def _tail_verdict(kind: str, ctx: _Context, s: ServiceLevel) -> Verdict:
             why.append("no admissible model on the " + " and ".join(missing) + " axis")
         if total is not None and not models_pass:
             why.append(f"the admissible upper bounds add up to {format_probability(total)} > {req_p:g}")
+        why += not_run
         pre = f"{events} {what} epochs observed" if events else f"No {what} observed"
         sentence = f"{pre}, but {req} is not demonstrated: " + "; ".join(why or ["no evidence"]) + "."
     return Verdict(kind, v, req, basis, sentence, tuple(items))
@@ -784,12 +799,12 @@ def assess(analysis: Analysis, evidence: Evidence | None = None) -> Assessment:
         raise ValueError("the analysis has no counted evidence (run analyze() on a table)")
     evt = {e.axis: e for e in analysis.evt}
     cl = {c.axis: c for c in analysis.confidence}
+    failed = {(m, a): why for m, a, why in analysis.method_failures}
     cache: dict = {}
 
     def ctx_of(ev: StationEvidence) -> _Context:
-        return _Context(
-            ev, evt, analysis.parametric, cl, ev.interval_s or evidence.pooled.interval_s or 1.0, cache
-        )
+        interval = ev.interval_s or evidence.pooled.interval_s or 1.0
+        return _Context(ev, evt, analysis.parametric, cl, interval, cache, failed)
 
     pooled = {s.name: service_verdicts(ctx_of(evidence.pooled), s) for s in analysis.services}
     by_station = {

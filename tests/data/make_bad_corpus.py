@@ -54,6 +54,10 @@ def glab() -> None:
     sod = nan[sbasout].split()[3]
     nan[sbasout] = nan[sbasout].replace(f" {sod} ", " NaN ".rjust(len(sod) + 2), 1)
     put(bad / "seconds-of-day-nan.glab", "".join(nan).encode())
+    prefix = list(lines)
+    prefix[sbasout + 2] = "SBASOUY" + prefix[sbasout + 2][7:]  # the line type itself hit
+    prefix[info + 2] = "INFP" + prefix[info + 2][4:]
+    put(bad / "line-type-one-char-changed.glab", "".join(prefix).encode())
     packed = gz("".join(lines).encode())
     put(bad / "gzip-truncated.glab.gz", packed[: len(packed) // 2])
     flipped = bytearray(packed)

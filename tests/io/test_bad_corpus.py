@@ -27,6 +27,13 @@ EXPECTED: dict[str, str | tuple[int, int, dict[str, int], str]] = {
         {"malformed_line": 1},
         "155: malformed line: no-solution INFO line that does not parse",
     ),
+    # gLAB: one character of the line type itself (SBASOUY, INFP): read and rejected, not skipped
+    "glab/bad/line-type-one-char-changed.glab": (
+        129,
+        127,
+        {"malformed_line": 2},
+        "157: malformed line: line type 'INFP', one character from an epoch line",
+    ),
     # gLAB: a NaN second of day was a polars traceback
     "glab/bad/seconds-of-day-nan.glab": (129, 128, {"time_out_of_range": 1}, "176: time out of range"),
     "glab/bad/gzip-truncated.glab.gz": "truncated or corrupt gzip stream",

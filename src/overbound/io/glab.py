@@ -259,6 +259,7 @@ def read_glab(
         raise InputError(name, _NO_SBASOUT)
     log.rows_read = sbasout.height
     info = numbered.filter(pl.col("text").str.starts_with("INFO"))
+    _reject_near_misses(numbered, log)
 
     solved, layouts = _parse_sbasout(sbasout, log)
     nosol, reasons = _no_solution_rows(info, log)
@@ -276,6 +277,24 @@ def read_glab(
     df = pl.concat([solved.drop("receiver", "up"), nosol], how="diagonal_relaxed").sort("_line")
     df = df.with_columns(pl.lit(stn).alias("station"))
     return finalize_epochs(df, log, format="glab", notes=tuple(notes))
+
+
+def _one_char_from(token: pl.Expr, word: str) -> pl.Expr:
+    """``token`` differs from ``word`` in exactly one character (same length)."""
+    diffs = pl.sum_horizontal([(token.str.slice(i, 1) != c).cast(pl.Int32) for i, c in enumerate(word)])
+    return (token.str.len_chars() == len(word)) & (diffs == 1)
+
+
+def _reject_near_misses(numbered: pl.DataFrame, log: RowLog) -> None:
+    """Lines whose type is one character from ``SBASOUT``, or from ``INFO`` on a no-solution
+    message: a corrupted epoch line, read and rejected rather than skipped as another type."""
+    token = pl.col("text").str.extract(r"^(\S+)")
+    anchors = pl.any_horizontal([pl.col("text").str.contains(a, literal=True) for a in _NOSOL_ANCHORS])
+    near = _one_char_from(token, "SBASOUT") | (_one_char_from(token, "INFO") & anchors)
+    bad = numbered.filter(near.fill_null(False))
+    log.rows_read += bad.height
+    for line, text in bad.iter_rows():
+        log.reject(line, f"malformed line: line type {text.split()[0]!r}, one character from an epoch line")
 
 
 def _read_lines(source: str | Path | TextIO | BinaryIO) -> list[str]:

@@ -25,7 +25,7 @@ _US = 1_000_000
 #: of next year. Readers reject a time outside ``GPS_EPOCH <= t < PLAUSIBLE_END`` as a counted
 #: malformed row: a corrupted year (0000, 9999) must not reach the analysis, whose tables span
 #: the campaign's time range.
-PLAUSIBLE_END = dt.datetime(dt.date.today().year + 2, 1, 1)
+PLAUSIBLE_END = dt.datetime(dt.datetime.now(dt.UTC).year + 2, 1, 1)
 #: The years of :data:`GPS_EPOCH` to :data:`PLAUSIBLE_END` (for readers that parse a year field).
 PLAUSIBLE_YEARS = range(GPS_EPOCH.year, PLAUSIBLE_END.year)
 #: The span as rejection messages print it.
