@@ -951,6 +951,11 @@ class Worker:
         self.restarts += 1
         self._start()
 
+    def _killed(self, base: dict, outcome: str, message: str, elapsed: float, peak: int) -> Outcome:
+        """Restart the worker that went over a limit; the case's outcome."""
+        self.restart()
+        return Outcome(**base, outcome=outcome, message=message, seconds=elapsed, peak_rss_kib=peak)
+
     def stop(self) -> None:
         with contextlib.suppress(OSError, BrokenPipeError):
             self.conn.send(None)
@@ -1009,22 +1014,10 @@ class Worker:
             rss = _vmrss_kib(self.proc.pid)
             peak = max(peak, rss)
             if rss > self.memory_kib:
-                self.restart()
-                return Outcome(
-                    **base,
-                    outcome="memory",
-                    message=f"resident {rss // 1024} MiB, killed",
-                    seconds=elapsed,
-                    peak_rss_kib=rss,
-                )
+                return self._killed(base, "memory", f"resident {rss // 1024} MiB, killed", elapsed, rss)
             if elapsed > self.timeout:
-                self.restart()
-                return Outcome(
-                    **base,
-                    outcome="hang",
-                    message=f"no answer after {self.timeout:.0f} s, killed",
-                    seconds=elapsed,
-                    peak_rss_kib=peak,
+                return self._killed(
+                    base, "hang", f"no answer after {self.timeout:.0f} s, killed", elapsed, peak
                 )
 
 
