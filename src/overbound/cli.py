@@ -203,7 +203,7 @@ def _read_options(reference, reference_ecef, fmt, station, strict, start, end, c
 
 
 @main.command()
-@click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
 @_output_dir("Output directory for summary.json and report.html.")
 @_services_option
 @_with_input_options
@@ -524,6 +524,33 @@ def simulate(
 
 
 @main.command()
+@click.argument("dataset", type=click.Path(file_okay=False, path_type=Path))
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
+@_with_input_options
+def ingest(dataset, inputs, **inputs_opts) -> None:
+    """Add INPUTS (any supported format) to the campaign DATASET, split by station and GPS day.
+
+    DATASET is a directory (created when new) of Parquet partitions
+    station=ID/date=YYYY-MM-DD/part-0.parquet with a manifest, dataset.json; analyse it with
+    `overbound analyze DATASET -o OUT`. A station-day already there is replaced, and said so.
+    """
+    from overbound.io.dataset import ingest as run
+
+    result = run(dataset, list(inputs), **_read_options(**inputs_opts))
+    for r in result.reports:
+        console.print(
+            f"{r.source}: {r.rows_kept} epochs of {r.rows_read} rows ({r.format}); rejected {r.n_rejected} "
+            f"{dict(sorted(r.rejected.items()))}; invalidated {sum(r.invalidated.values())}",
+            highlight=False,
+            soft_wrap=True,
+        )
+    replaced = set(result.replaced)
+    for p in result.written:
+        note = " (replaced)" if p.key in replaced else ""
+        click.echo(f"{dataset / p.key}: {result.rows[p.key]} epochs{note}")
+
+
+@main.command()
 @click.argument("source", type=click.Path(dir_okay=False, path_type=Path))
 @click.option(
     "-o",
@@ -551,7 +578,7 @@ def convert(source, out, **inputs_opts) -> None:
 
 
 @main.command()
-@click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
 @_output_dir("Output directory for confidence.json and confidence.html.")
 @click.option(
     "--axis",
@@ -668,7 +695,7 @@ def _auto_or_float(*, below: float | None = None, minimum: float | None = None):
 
 
 @main.command()
-@click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
 @_output_dir("Output directory for evt.json and evt.html.")
 @click.option(
     "--axis",
@@ -760,7 +787,7 @@ def _decorrelation_option(ctx, param, value: str) -> str | float:
 
 
 @main.command()
-@click.argument("inputs", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=Path))
+@click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
 @_output_dir("Output directory for parametric.json and parametric.html.")
 @_services_option
 @click.option(

@@ -46,7 +46,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
-__all__ = ["MANIFEST", "OutputError", "StagedDirectory", "staged_directory", "staged_files"]
+__all__ = ["MANIFEST", "OutputError", "StagedDirectory", "locked", "staged_directory", "staged_files"]
 
 #: The manifest of an output directory: which command wrote which files.
 MANIFEST = ".overbound.json"
@@ -111,7 +111,7 @@ def _checked_parent(target: Path) -> None:
 
 
 @contextlib.contextmanager
-def _locked(target: Path) -> Iterator[None]:
+def locked(target: Path) -> Iterator[None]:
     """Hold the target's lock file; raise :class:`OutputError` when another run holds it."""
     path = _lock_path(target)
     while True:
@@ -261,7 +261,7 @@ def staged_directory(target: str | Path, *, command: str) -> Iterator[StagedDire
     target = Path(os.path.realpath(target))
     _checked_parent(target)
     _check_directory_target(target)
-    with _locked(target), _terminate_as_interrupt():
+    with locked(target), _terminate_as_interrupt():
         _remove_leftovers(target)
         stage = StagedDirectory(target=target, path=_make_staging(target), command=command)
         try:
@@ -427,7 +427,7 @@ def staged_files(target: str | Path) -> Iterator[Path]:
         raise OutputError(target, "is a directory, expected a file name")
     if target.exists() and not os.access(target, os.W_OK):
         raise OutputError(target, "is not writable")
-    with _locked(target), _terminate_as_interrupt():
+    with locked(target), _terminate_as_interrupt():
         _remove_leftovers(target)
         stage = _make_staging(target)
         try:

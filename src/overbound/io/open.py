@@ -203,7 +203,8 @@ def read(
 
     Parameters
     ----------
-    source : path or open stream (text or binary); ``.gz`` is handled by content.
+    source : path or open stream (text or binary); ``.gz`` is handled by content; a campaign
+        dataset directory (:mod:`overbound.io.dataset`) reads as its whole epoch table.
     format : one of :data:`FORMATS`; sniffed from the content when ``None``.
     reference : true antenna position, for formats that carry positions rather than errors.
     station : station name; by default the reader takes it from the content or the file name.
@@ -219,6 +220,10 @@ def read(
     (table, report) : the epoch table (see :mod:`overbound.io.schema`) and a
         :class:`~overbound.io.schema.ReadReport` of rows read, kept and rejected.
     """
+    if isinstance(source, str | Path) and (format in (None, "dataset")) and _is_dataset(source):
+        from overbound.io.dataset import read_dataset
+
+        return read_dataset(source, columns=columns, time_range=time_range)
     fmt = format or sniff(source)
     readers = _readers()
     if fmt not in readers:
@@ -239,6 +244,12 @@ def read(
             report = dataclasses.replace(report, rows_kept=kept.height, rejected=rejected)
         table = kept
     return table, report
+
+
+def _is_dataset(path: str | Path) -> bool:
+    from overbound.io.dataset import is_dataset
+
+    return is_dataset(path)
 
 
 def _filter_time(

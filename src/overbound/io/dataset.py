@@ -1,0 +1,309 @@
+"""The campaign dataset: the epoch table of many stations and days, partitioned by station and GPS day.
+
+Layout (hive partitioning, readable by polars, pyarrow, Dask and DuckDB as one table)::
+
+    DATASET/
+      dataset.json                                   the manifest
+      station=<ID>/date=<YYYY-MM-DD>/part-0.parquet  one station-day of the epoch table
+
+A partition holds the canonical columns of :mod:`overbound.io.schema` (``station`` included,
+so a file read alone is still a whole epoch table), sorted by time, written by
+:func:`~overbound.io.table.write_epochs` (zstd, provenance of the input that gave it).
+The day is the GPS day of the epochs (GPS time, like the table).
+
+The manifest (``overbound.dataset/1``) holds the overbound version, the stations with their
+reference positions when an input was read against one, and the read report of every
+ingested input with the partitions it wrote, so that kept + rejected = read stays auditable
+after the inputs are gone.
+
+Every file is written through a temporary name and renamed into place, under the
+dataset's lock (:func:`overbound.output.locked`): a reader sees each partition and the
+manifest whole, old or new.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as dt
+import json
+import os
+import re
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import polars as pl
+
+from overbound import __version__
+from overbound.io.geodesy import Reference
+from overbound.io.schema import InputError, ReadReport, validate_epochs
+
+__all__ = [
+    "MANIFEST",
+    "SCHEMA",
+    "IngestResult",
+    "Partition",
+    "create_dataset",
+    "ingest",
+    "is_dataset",
+    "partitions",
+    "read_dataset",
+    "read_manifest",
+]
+
+#: The manifest's file name inside a dataset.
+MANIFEST = "dataset.json"
+#: The manifest's schema name.
+SCHEMA = "overbound.dataset/1"
+_PARTITION = re.compile(r"station=(?P<station>[^/]+)/date=(?P<date>\d{4}-\d{2}-\d{2})/part-0\.parquet")
+
+
+@dataclass(frozen=True, slots=True)
+class Partition:
+    """One station-day of a dataset: its station, GPS day, and file."""
+
+    station: str
+    date: dt.date
+    path: Path
+
+    @property
+    def key(self) -> str:
+        """``station=ID/date=YYYY-MM-DD`` (the partition's directory, relative to the dataset)."""
+        return f"station={self.station}/date={self.date.isoformat()}"
+
+
+@dataclass(frozen=True)
+class IngestResult:
+    """What :func:`ingest` did.
+
+    Attributes
+    ----------
+    written : the partitions written, in order (station, day).
+    replaced : the keys of those that replaced an existing partition.
+    reports : the read report of each input.
+    rows : epochs written per partition key.
+    """
+
+    written: tuple[Partition, ...]
+    replaced: tuple[str, ...]
+    reports: tuple[ReadReport, ...]
+    rows: Mapping[str, int] = field(default_factory=dict)
+
+
+def is_dataset(path: str | Path) -> bool:
+    """Whether ``path`` is a dataset directory (it holds :data:`MANIFEST`)."""
+    p = Path(path)
+    return p.is_dir() and (p / MANIFEST).is_file()
+
+
+def create_dataset(path: str | Path) -> Path:
+    """Create an empty dataset at ``path`` (a new or empty directory); return its path.
+
+    Raises
+    ------
+    InputError
+        ``path`` is a file, or a non-empty directory that is not a dataset.
+    """
+    p = Path(path)
+    if is_dataset(p):
+        return p
+    if p.exists() and (not p.is_dir() or any(p.iterdir())):
+        raise InputError(
+            str(p), "exists and is not an overbound dataset (no dataset.json); give a new directory"
+        )
+    p.mkdir(parents=True, exist_ok=True)
+    _write_manifest(p, {"schema": SCHEMA, "overbound_version": __version__, "stations": {}, "inputs": []})
+    return p
+
+
+def read_manifest(path: str | Path) -> dict:
+    """The manifest of the dataset at ``path``.
+
+    Raises
+    ------
+    InputError
+        No manifest, or one that is not the JSON of :data:`SCHEMA`.
+    """
+    p = Path(path) / MANIFEST
+    try:
+        doc = json.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise InputError(str(path), "not an overbound dataset (no dataset.json)") from None
+    except (OSError, ValueError) as exc:
+        raise InputError(str(p), f"unreadable dataset manifest ({exc})") from None
+    if not isinstance(doc, dict) or doc.get("schema") != SCHEMA:
+        raise InputError(str(p), f"not a {SCHEMA} manifest")
+    return doc
+
+
+def partitions(path: str | Path) -> list[Partition]:
+    """The partitions of the dataset at ``path``, sorted by station then day.
+
+    Raises
+    ------
+    InputError
+        ``path`` is not a dataset.
+    """
+    root = Path(path)
+    read_manifest(root)
+    out = []
+    for f in root.glob("station=*/date=*/part-0.parquet"):
+        m = _PARTITION.fullmatch(f.relative_to(root).as_posix())
+        if m:
+            out.append(Partition(m["station"], dt.date.fromisoformat(m["date"]), f))
+    return sorted(out, key=lambda p: (p.station, p.date))
+
+
+def ingest(
+    dataset: str | Path,
+    sources: Sequence,
+    *,
+    reference: Reference | None = None,
+    read: Callable | None = None,
+    **read_options,
+) -> IngestResult:
+    """Add inputs of any supported format to a dataset, split by station and GPS day.
+
+    Parameters
+    ----------
+    dataset : the dataset directory (created when new).
+    sources : input files (any format :func:`overbound.io.open.read` reads).
+    reference : true antenna position, for formats that carry positions; recorded in the
+        manifest for the stations of the input.
+    read : the reader (default :func:`overbound.io.open.read`; a parameter for tests).
+    **read_options : further options of :func:`overbound.io.open.read` (``format``,
+        ``station``, ``strict``, ``mapping``, ``time_range``).
+
+    Returns
+    -------
+    IngestResult : the partitions written and replaced, and the read reports.
+
+    Notes
+    -----
+    Every input is read before anything is written, so an input that cannot be read leaves
+    the dataset as it was. A station-day already in the dataset is replaced by the new
+    epochs of that station and day (the result lists it); two inputs of one call that
+    cover the same station-day are one table, checked like the inputs of
+    ``overbound analyze`` (a time repeated across them is an error).
+    """
+    from overbound.io.open import read as read_any
+    from overbound.io.table import write_epochs
+    from overbound.output import locked
+
+    root = create_dataset(dataset)
+    reader = read or read_any
+    tables, reports = [], []
+    for src in sources:
+        t, r = reader(src, reference=reference, **read_options)
+        tables.append(t)
+        reports.append(r)
+    if not tables:
+        raise InputError(str(root), "no input to ingest")
+    table = pl.concat(tables, how="diagonal_relaxed").sort(["station", "time"], maintain_order=True)
+    table = validate_epochs(table, ", ".join(r.source for r in reports))
+    days = table.with_columns(pl.col("time").dt.date().alias("_date"))
+    written, replaced, rows = [], [], {}
+    with locked(root):
+        manifest = read_manifest(root)
+        for (station, day), part in days.group_by(["station", "_date"], maintain_order=True):
+            p = Partition(
+                str(station), day, root / f"station={station}" / f"date={day.isoformat()}" / "part-0.parquet"
+            )
+            if p.path.exists():
+                replaced.append(p.key)
+            p.path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = p.path.with_name(f".part-0.tmp-{os.getpid()}.parquet")
+            try:
+                # the input's report as provenance when there is one input (several: see the manifest)
+                write_epochs(part.drop("_date"), tmp, report=reports[0] if len(reports) == 1 else None)
+                os.replace(tmp, p.path)
+            finally:
+                with contextlib.suppress(FileNotFoundError):
+                    tmp.unlink()
+            written.append(p)
+            rows[p.key] = part.height
+        _record(manifest, reports, written, reference, table)
+        _write_manifest(root, manifest)
+    return IngestResult(tuple(written), tuple(replaced), tuple(reports), rows)
+
+
+def _record(manifest: dict, reports, written, reference: Reference | None, table: pl.DataFrame) -> None:
+    stations = manifest.setdefault("stations", {})
+    for name in table["station"].unique().sort().to_list():
+        entry = stations.setdefault(name, {"reference": None})
+        if reference is not None:
+            entry["reference"] = [reference.lat_deg, reference.lon_deg, reference.height_m]
+    manifest.setdefault("inputs", []).append(
+        {
+            "reports": [r.to_dict() for r in reports],
+            "partitions": [p.key for p in written],
+            "overbound_version": __version__,
+        }
+    )
+    manifest["overbound_version"] = __version__
+
+
+def _write_manifest(root: Path, doc: dict) -> None:
+    tmp = root / f".{MANIFEST}.tmp-{os.getpid()}"
+    tmp.write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n", encoding="utf-8")
+    os.replace(tmp, root / MANIFEST)
+
+
+def read_dataset(
+    path: str | Path,
+    *,
+    columns: Sequence[str] | None = None,
+    time_range: tuple[dt.datetime | None, dt.datetime | None] | None = None,
+) -> tuple[pl.DataFrame, ReadReport]:
+    """The whole epoch table of a dataset, and a report of what was read.
+
+    The partitions are read in (station, day) order and concatenated: the same table as
+    the one of its inputs read together. ``columns`` keeps the required columns plus these;
+    ``time_range`` keeps ``start <= time < stop`` (the epochs outside counted as
+    ``outside_time_range``).
+
+    Raises
+    ------
+    InputError
+        Not a dataset, no partition, or a partition that cannot be read (named).
+    """
+    from overbound.io.schema import REQUIRED
+    from overbound.io.table import read_parquet
+
+    root = Path(path)
+    parts = partitions(root)
+    if not parts:
+        raise InputError(str(root), "the dataset has no partition (ingest inputs first)")
+    tables = []
+    for p in parts:
+        t, _ = read_parquet(p.path, columns=columns)
+        tables.append(t)
+    table = pl.concat(tables, how="diagonal_relaxed")
+    if columns is not None:
+        keep = set(REQUIRED) | set(columns)
+        table = table.select([c for c in table.columns if c in keep])
+    n = table.height
+    rejected = {}
+    if time_range is not None:
+        start, stop = time_range
+        expr = pl.lit(True)
+        if start is not None:
+            expr &= pl.col("time") >= start
+        if stop is not None:
+            expr &= pl.col("time") < stop
+        table = table.filter(expr)
+        if n - table.height:
+            rejected["outside_time_range"] = n - table.height
+    stations = sorted({p.station for p in parts})
+    report = ReadReport(
+        source=str(root),
+        format="dataset",
+        rows_read=n,
+        rows_kept=table.height,
+        rejected=rejected,
+        notes=(
+            f"{len(parts)} station-days of {len(stations)} stations ({', '.join(stations[:10])}"
+            f"{', ...' if len(stations) > 10 else ''}); the read reports of its inputs are in {MANIFEST}",
+        ),
+    )
+    return table, report
