@@ -460,8 +460,9 @@ def _evt_line(a) -> str:
     "--output",
     "out",
     required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="Output epoch table (.parquet or .csv).",
+    type=click.Path(path_type=Path),
+    help="Output epoch table (.parquet or .csv), or a campaign dataset directory (any other name), "
+    "written one station-day at a time.",
 )
 @click.option("--days", default=7.0, show_default=True, type=click.FloatRange(min=0, min_open=True))
 @click.option("--seed", default=0, show_default=True, type=int)
@@ -513,6 +514,14 @@ def simulate(
         anomalies=tuple(parse_anomaly(a) for a in anomalies),
         **{k: v for k, v in options.items() if v is not None},
     )
+    if out.suffix.lower() not in (".parquet", ".pq", ".csv"):
+        from overbound.simulate import write_simulation_dataset
+
+        with _progress() as bar:
+            bar.add_task(f"simulating {stations} x {days:g} days into {out}", total=None)
+            parts = write_simulation_dataset(config, out)
+        click.echo(f"{out}: {len(parts)} station-days of {stations} stations (dataset)")
+        return
     with staged_files(out) as staged, _progress() as bar:
         bar.add_task(f"simulating {days:g} days", total=None)
         sim = run(config)

@@ -146,6 +146,7 @@ from __future__ import annotations
 import datetime as dt
 import json
 import math
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any, TypeAlias
@@ -798,15 +799,71 @@ def simulate(config: SimulationConfig | None = None) -> Simulation:
     (True, ['PA'])
     """
     config = SimulationConfig() if config is None else config
-    if config.stations == 1:
-        parts = [_simulate_station(config, config.station, np.random.SeedSequence(config.seed))]
-    else:
-        children = np.random.SeedSequence(config.seed).spawn(config.stations)
-        parts = [
-            _simulate_station(config, f"{config.station}{i + 1:02d}", ss) for i, ss in enumerate(children)
-        ]
+    parts = [_simulate_station(config, name, ss) for name, ss in _station_seeds(config)]
     table = parts[0][0] if len(parts) == 1 else pl.concat([p[0] for p in parts], how="vertical")
     return Simulation(table=table, config=config, stations=tuple(p[1] for p in parts))
+
+
+def _station_seeds(config: SimulationConfig) -> list[tuple[str, np.random.SeedSequence]]:
+    """Each station's name and ``SeedSequence``: the seed itself for one station, else its spawns."""
+    if config.stations == 1:
+        return [(config.station, np.random.SeedSequence(config.seed))]
+    children = np.random.SeedSequence(config.seed).spawn(config.stations)
+    return [(f"{config.station}{i + 1:02d}", ss) for i, ss in enumerate(children)]
+
+
+def write_simulation_dataset(config: SimulationConfig, dataset: str | Path) -> list:
+    """Simulate a network straight into a campaign dataset, one station-day at a time.
+
+    Memory is one chunk of the grid plus one station-day, whatever the number of stations
+    and days (a station-year at 1 Hz never sits in memory). Each partition is the station-day
+    of :func:`simulate` with the same config, the same rows and values, written by
+    :func:`~overbound.io.dataset.write_partition` with the provenance
+    ``extra.simulation = {generator, config, station}`` (that station's realised truth); the
+    manifest holds the config and every station's truth under ``simulation``.
+
+    Returns
+    -------
+    list of :class:`~overbound.io.dataset.Partition` : the partitions written, in order.
+    """
+    from overbound import __version__
+    from overbound.io.dataset import create_dataset, read_manifest, write_manifest, write_partition
+    from overbound.output import locked
+
+    root = create_dataset(dataset)
+    generator = f"overbound.simulate {__version__}"
+    written, truths = [], []
+    with locked(root):
+        for name, ss in _station_seeds(config):
+            truth, chunks = _station_chunks(config, name, ss)
+            extra = {
+                "simulation": {"generator": generator, "config": config.to_dict(), "station": truth.to_dict()}
+            }
+            for day in _days(chunks):
+                written.append(write_partition(root, day, extra=extra))
+            truths.append(truth.to_dict())
+        manifest = read_manifest(root)
+        manifest["simulation"] = {"generator": generator, "config": config.to_dict(), "stations": truths}
+        manifest.setdefault("stations", {}).update({t["name"]: {"reference": None} for t in truths})
+        write_manifest(root, manifest)
+    return written
+
+
+def _days(chunks: Iterator[pl.DataFrame]) -> Iterator[pl.DataFrame]:
+    """The chunks of a station regrouped by GPS day (one day held at a time)."""
+    pending: list[pl.DataFrame] = []
+    current = None
+    for chunk in chunks:
+        day = chunk["time"].dt.date()
+        for d in day.unique(maintain_order=True).to_list():
+            part = chunk.filter(day == d)
+            if current is not None and d != current and pending:
+                yield pl.concat(pending, how="vertical", rechunk=True)
+                pending = []
+            pending.append(part)
+            current = d
+    if pending:
+        yield pl.concat(pending, how="vertical", rechunk=True)
 
 
 def _marked_poisson(
@@ -856,20 +913,35 @@ def _geometry(rng: np.random.Generator, log_sd: float) -> tuple[np.ndarray, np.n
     return 2.0 * np.pi * _HARMONICS / SIDEREAL_DAY_S, amp, phase
 
 
-def _interval_mask(intervals: np.ndarray, n: int, dt_s: float) -> np.ndarray:
-    """Boolean grid mask of epochs k with s <= k dt < e for some interval (s, e)."""
-    d = np.zeros(n + 1, dtype=np.int32)
-    if len(intervals):
-        lo = np.clip(np.ceil(intervals[:, 0] / dt_s - 1e-9), 0, n).astype(np.int64)
-        hi = np.clip(np.ceil(intervals[:, 1] / dt_s - 1e-9), 0, n).astype(np.int64)
-        np.add.at(d, lo, 1)
-        np.add.at(d, hi, -1)
-    return np.cumsum(d[:n]) > 0
-
-
 def _simulate_station(
     c: SimulationConfig, name: str, ss: np.random.SeedSequence
 ) -> tuple[pl.DataFrame, StationTruth]:
+    """The table of one station (its chunks, concatenated) and its realised truth."""
+    truth, chunks = _station_chunks(c, name, ss)
+    parts = list(chunks)
+    return (parts[0] if len(parts) == 1 else pl.concat(parts, how="vertical", rechunk=True)), truth
+
+
+def _interval_mask(intervals: np.ndarray, k0: int, k1: int, dt_s: float) -> np.ndarray:
+    """Mask of the grid epochs ``k0 <= k < k1`` with ``s <= k dt < e`` for some interval ``(s, e)``."""
+    d = np.zeros(k1 - k0 + 1, dtype=np.int32)
+    if len(intervals):
+        lo = np.clip(np.ceil(intervals[:, 0] / dt_s - 1e-9), k0, k1).astype(np.int64) - k0
+        hi = np.clip(np.ceil(intervals[:, 1] / dt_s - 1e-9), k0, k1).astype(np.int64) - k0
+        np.add.at(d, lo, 1)
+        np.add.at(d, hi, -1)
+    return np.cumsum(d[:-1]) > 0
+
+
+def _station_chunks(
+    c: SimulationConfig, name: str, ss: np.random.SeedSequence
+) -> tuple[StationTruth, Iterator[pl.DataFrame]]:
+    """The realised truth of one station, and its epoch table as consecutive chunks of the grid.
+
+    Memory is one chunk (:data:`_CHUNK` grid epochs) plus the station's events, whatever the
+    campaign's length: a station-year streams into a dataset one day at a time. The chunks
+    concatenated are the station's table.
+    """
     n, dt_s = c.n_epochs, c.interval_s
     t_end = n * dt_s
     streams = [np.random.default_rng(s) for s in ss.spawn(8)]
@@ -897,163 +969,6 @@ def _simulate_station(
     )
     outs = outs[np.argsort(outs[:, 0], kind="stable")]
 
-    # 3. gaps and outages on the grid
-    kept = np.flatnonzero(~_interval_mask(gaps, n, dt_s))
-    outage_kept = _interval_mask(outs, n, dt_s)[kept]
-
-    biases = [a for a in c.anomalies if isinstance(a, BiasAnomaly)]
-    bands = [a for a in c.anomalies if isinstance(a, BandAnomaly)]
-    has_bias = bool(biases)
-    m = kept.size
-    out = {
-        k: np.empty(m)
-        for k in (
-            "hpe",
-            "vpe",
-            "hpl",
-            "vpl",
-            "east",
-            "north",
-            "sigma_v_true",
-            "sigma_h_true",
-            "p_mi_v_true",
-            "p_mi_h_true",
-        )
-    }
-    if has_bias:
-        out["bias_v_true"] = np.empty(m)
-        out["bias_h_true"] = np.empty(m)
-    nsv = np.empty(m, dtype=np.int16)
-    regime = np.empty(m, dtype=np.int8)
-
-    # 4. chunks with carried filter states
-    phi = math.exp(-dt_s / c.correlation_s) if c.correlation_s > 0 else 0.0
-    b_ar, a_ar = np.array([math.sqrt(1.0 - phi * phi)]), np.array([1.0, -phi])
-    zi = {
-        "v": phi * r_zv.standard_normal(1),
-        "e": phi * r_ze.standard_normal(1),
-        "n": phi * r_zn.standard_normal(1),
-    }
-    alpha = math.exp(-dt_s / c.set_relax_s)
-    k_set = np.ceil(set_t / dt_s - 1e-9).astype(np.int64)
-    w_set = set_j * np.exp(-(k_set * dt_s - set_t) / c.set_relax_s)
-    zi_set = np.zeros(1)
-    sod0 = (c.start - c.start.replace(hour=0, minute=0, second=0, microsecond=0)).total_seconds()
-    iono_om, iono_t0 = 2.0 * np.pi / 86400.0, 14.0 * 3600.0 - sod0 - c.longitude_deg * 240.0
-    f = c.sigma_ratio
-    eps_v, c_v = (c.tail_fraction, c.tail_scale) if c.tail_axis in ("both", "vertical") else (0.0, 1.0)
-    eps_h, c_h = (c.tail_fraction, c.tail_scale) if c.tail_axis in ("both", "horizontal") else (0.0, 1.0)
-    log_sv0, log_r = math.log(c.sigma_v0), math.log(c.h_to_v)
-
-    for k0 in range(0, n, _CHUNK):
-        k1 = min(n, k0 + _CHUNK)
-        length = k1 - k0
-        t = np.arange(k0, k1, dtype=float) * dt_s
-        g_v = np.zeros(length)
-        g_h = np.zeros(length)
-        for j in range(_HARMONICS.size):
-            g_v += amp_v[j] * np.sin(om_v[j] * t + ph_v[j])
-            g_h += amp_h[j] * np.sin(om_h[j] * t + ph_h[j])
-        sel = (k_set >= k0) & (k_set < k1)
-        impulses = np.bincount(k_set[sel] - k0, weights=w_set[sel], minlength=length)
-        x_set, zi_set = signal.lfilter([1.0], [1.0, -alpha], impulses, zi=zi_set)
-        g_v += c.set_log_max * np.tanh(x_set / c.set_log_max)
-        nsv_c = np.clip(np.rint(_NSV_MID - _NSV_SLOPE * g_v), _NSV_MIN, _NSV_MAX).astype(np.int16)
-        log_sv = g_v
-        log_sv += log_sv0
-        log_sv += c.iono_amplitude * np.cos(iono_om * (t - iono_t0))
-        sigma_v = np.exp(log_sv)
-        g_h += log_sv
-        g_h += log_r
-        sigma_h = np.exp(g_h)
-        vpl = c.k_v * sigma_v
-        hpl = c.k_h * sigma_h
-        s_v = (f / c.k_v) * vpl
-        s_h = (f / c.k_h) * hpl
-        for a in bands:
-            if a.axis == "vertical":
-                s_v[(vpl >= a.lo) & (vpl < a.hi)] *= a.factor
-            else:
-                s_h[(hpl >= a.lo) & (hpl < a.hi)] *= a.factor
-        reg = ((state0 + np.searchsorted(switches, t, side="right")) & 1).astype(np.int8)
-        z_v, zi["v"] = signal.lfilter(b_ar, a_ar, r_zv.standard_normal(length), zi=zi["v"])
-        z_e, zi["e"] = signal.lfilter(b_ar, a_ar, r_ze.standard_normal(length), zi=zi["e"])
-        z_n, zi["n"] = signal.lfilter(b_ar, a_ar, r_zn.standard_normal(length), zi=zi["n"])
-        mult_v = np.where(reg == 1, c_v, 1.0) if eps_v > 0 else 1.0
-        mult_h = np.where(reg == 1, c_h, 1.0) if eps_h > 0 else 1.0
-        vpe = s_v * mult_v * z_v
-        east = s_h * mult_h * z_e
-        north = s_h * mult_h * z_n
-        b_v = b_h = None
-        if has_bias:
-            b_v, b_h = np.zeros(length), np.zeros(length)
-            for a in biases:
-                (b_v if a.axis == "vertical" else b_h)[:] += a.value(t)
-            vpe += b_v
-            north += b_h
-        p_v = _p_exceed_v(vpl, s_v, b_v)
-        p_h = _p_exceed_h(hpl, s_h, b_h)
-        if eps_v > 0:
-            p_v = (1.0 - eps_v) * p_v + eps_v * _p_exceed_v(vpl, c_v * s_v, b_v)
-        if eps_h > 0:
-            p_h = (1.0 - eps_h) * p_h + eps_h * _p_exceed_h(hpl, c_h * s_h, b_h)
-
-        lo, hi = np.searchsorted(kept, [k0, k1])
-        idx = kept[lo:hi] - k0
-        cols = {
-            "vpe": vpe,
-            "east": east,
-            "north": north,
-            "vpl": vpl,
-            "hpl": hpl,
-            "sigma_v_true": s_v,
-            "sigma_h_true": s_h,
-            "p_mi_v_true": p_v,
-            "p_mi_h_true": p_h,
-        }
-        if has_bias:
-            cols["bias_v_true"], cols["bias_h_true"] = b_v, b_h
-        for key, val in cols.items():
-            out[key][lo:hi] = val[idx]
-        out["hpe"][lo:hi] = np.hypot(east[idx], north[idx])
-        nsv[lo:hi] = nsv_c[idx]
-        regime[lo:hi] = reg[idx]
-
-    for arr in out.values():
-        arr[outage_kept] = np.nan
-    kept *= c.interval_us
-    kept += round((c.start - dt.datetime(1970, 1, 1)).total_seconds() * 1e6)
-    time = pl.Series("time", kept, dtype=pl.Int64).cast(pl.Datetime("us"))
-    solution = pl.Series("_sol", ~outage_kept)
-    df = pl.DataFrame(
-        [
-            time,
-            *(pl.Series(k, out[k]) for k in ("hpe", "vpe", "hpl", "vpl", "east", "north")),
-            pl.Series("nsv", nsv),
-            solution,
-        ]
-    )
-    df = df.select(
-        "time",
-        pl.lit(name, dtype=pl.String).cast(pl.Categorical).alias("station"),
-        "hpe",
-        "vpe",
-        "hpl",
-        "vpl",
-        "east",
-        "north",
-        pl.when(pl.col("_sol")).then(pl.col("nsv")).otherwise(None).cast(pl.Int16).alias("nsv"),
-        pl.when(pl.col("_sol")).then(pl.lit("PA")).otherwise(None).cast(pl.Categorical).alias("mode"),
-    )
-    truth_names = [
-        "sigma_v_true",
-        "sigma_h_true",
-        *(["bias_v_true", "bias_h_true"] if has_bias else []),
-        "p_mi_v_true",
-        "p_mi_h_true",
-    ]
-    df = df.hstack([*(pl.Series(k, out.pop(k)) for k in truth_names), pl.Series("regime", regime)])
-
     def _triples(om: np.ndarray, amp: np.ndarray, ph: np.ndarray) -> tuple[tuple[float, float, float], ...]:
         return tuple((float(2 * np.pi / o), float(a), float(p)) for o, a, p in zip(om, amp, ph, strict=True))
 
@@ -1068,7 +983,139 @@ def _simulate_station(
         initial_regime=state0,
         regime_switches=tuple(float(x) for x in switches),
     )
-    return df, truth
+
+    def chunks() -> Iterator[pl.DataFrame]:
+        biases = [a for a in c.anomalies if isinstance(a, BiasAnomaly)]
+        bands = [a for a in c.anomalies if isinstance(a, BandAnomaly)]
+        has_bias = bool(biases)
+        # 4. chunks with carried filter states
+        phi = math.exp(-dt_s / c.correlation_s) if c.correlation_s > 0 else 0.0
+        b_ar, a_ar = np.array([math.sqrt(1.0 - phi * phi)]), np.array([1.0, -phi])
+        zi = {
+            "v": phi * r_zv.standard_normal(1),
+            "e": phi * r_ze.standard_normal(1),
+            "n": phi * r_zn.standard_normal(1),
+        }
+        alpha = math.exp(-dt_s / c.set_relax_s)
+        k_set = np.ceil(set_t / dt_s - 1e-9).astype(np.int64)
+        w_set = set_j * np.exp(-(k_set * dt_s - set_t) / c.set_relax_s)
+        zi_set = np.zeros(1)
+        sod0 = (c.start - c.start.replace(hour=0, minute=0, second=0, microsecond=0)).total_seconds()
+        iono_om, iono_t0 = 2.0 * np.pi / 86400.0, 14.0 * 3600.0 - sod0 - c.longitude_deg * 240.0
+        f = c.sigma_ratio
+        eps_v, c_v = (c.tail_fraction, c.tail_scale) if c.tail_axis in ("both", "vertical") else (0.0, 1.0)
+        eps_h, c_h = (c.tail_fraction, c.tail_scale) if c.tail_axis in ("both", "horizontal") else (0.0, 1.0)
+        log_sv0, log_r = math.log(c.sigma_v0), math.log(c.h_to_v)
+        start_us = round((c.start - dt.datetime(1970, 1, 1)).total_seconds() * 1e6)
+
+        for k0 in range(0, n, _CHUNK):
+            k1 = min(n, k0 + _CHUNK)
+            length = k1 - k0
+            t = np.arange(k0, k1, dtype=float) * dt_s
+            g_v = np.zeros(length)
+            g_h = np.zeros(length)
+            for j in range(_HARMONICS.size):
+                g_v += amp_v[j] * np.sin(om_v[j] * t + ph_v[j])
+                g_h += amp_h[j] * np.sin(om_h[j] * t + ph_h[j])
+            sel = (k_set >= k0) & (k_set < k1)
+            impulses = np.bincount(k_set[sel] - k0, weights=w_set[sel], minlength=length)
+            x_set, zi_set = signal.lfilter([1.0], [1.0, -alpha], impulses, zi=zi_set)
+            g_v += c.set_log_max * np.tanh(x_set / c.set_log_max)
+            nsv_c = np.clip(np.rint(_NSV_MID - _NSV_SLOPE * g_v), _NSV_MIN, _NSV_MAX).astype(np.int16)
+            log_sv = g_v
+            log_sv += log_sv0
+            log_sv += c.iono_amplitude * np.cos(iono_om * (t - iono_t0))
+            sigma_v = np.exp(log_sv)
+            g_h += log_sv
+            g_h += log_r
+            sigma_h = np.exp(g_h)
+            vpl = c.k_v * sigma_v
+            hpl = c.k_h * sigma_h
+            s_v = (f / c.k_v) * vpl
+            s_h = (f / c.k_h) * hpl
+            for a in bands:
+                if a.axis == "vertical":
+                    s_v[(vpl >= a.lo) & (vpl < a.hi)] *= a.factor
+                else:
+                    s_h[(hpl >= a.lo) & (hpl < a.hi)] *= a.factor
+            reg = ((state0 + np.searchsorted(switches, t, side="right")) & 1).astype(np.int8)
+            z_v, zi["v"] = signal.lfilter(b_ar, a_ar, r_zv.standard_normal(length), zi=zi["v"])
+            z_e, zi["e"] = signal.lfilter(b_ar, a_ar, r_ze.standard_normal(length), zi=zi["e"])
+            z_n, zi["n"] = signal.lfilter(b_ar, a_ar, r_zn.standard_normal(length), zi=zi["n"])
+            mult_v = np.where(reg == 1, c_v, 1.0) if eps_v > 0 else 1.0
+            mult_h = np.where(reg == 1, c_h, 1.0) if eps_h > 0 else 1.0
+            vpe = s_v * mult_v * z_v
+            east = s_h * mult_h * z_e
+            north = s_h * mult_h * z_n
+            b_v = b_h = None
+            if has_bias:
+                b_v, b_h = np.zeros(length), np.zeros(length)
+                for a in biases:
+                    (b_v if a.axis == "vertical" else b_h)[:] += a.value(t)
+                vpe += b_v
+                north += b_h
+            p_v = _p_exceed_v(vpl, s_v, b_v)
+            p_h = _p_exceed_h(hpl, s_h, b_h)
+            if eps_v > 0:
+                p_v = (1.0 - eps_v) * p_v + eps_v * _p_exceed_v(vpl, c_v * s_v, b_v)
+            if eps_h > 0:
+                p_h = (1.0 - eps_h) * p_h + eps_h * _p_exceed_h(hpl, c_h * s_h, b_h)
+
+            # 3. gaps (absent epochs) and outages (no solution) of this stretch of the grid
+            idx = np.flatnonzero(~_interval_mask(gaps, k0, k1, dt_s))
+            outage = _interval_mask(outs, k0, k1, dt_s)[idx]
+            cols = {
+                "hpe": np.hypot(east[idx], north[idx]),
+                "vpe": vpe[idx],
+                "hpl": hpl[idx],
+                "vpl": vpl[idx],
+                "east": east[idx],
+                "north": north[idx],
+                "sigma_v_true": s_v[idx],
+                "sigma_h_true": s_h[idx],
+                "p_mi_v_true": p_v[idx],
+                "p_mi_h_true": p_h[idx],
+            }
+            if has_bias:
+                cols["bias_v_true"], cols["bias_h_true"] = b_v[idx], b_h[idx]
+            for arr in cols.values():
+                arr[outage] = np.nan
+            yield _chunk_table(
+                name, (idx + k0) * c.interval_us + start_us, cols, nsv_c[idx], ~outage, reg[idx]
+            )
+
+    return truth, chunks()
+
+
+_TRUTH_ORDER = ("sigma_v_true", "sigma_h_true", "bias_v_true", "bias_h_true", "p_mi_v_true", "p_mi_h_true")
+
+
+def _chunk_table(
+    name: str, time_us: np.ndarray, cols: dict, nsv: np.ndarray, solution: np.ndarray, regime: np.ndarray
+) -> pl.DataFrame:
+    """One chunk of a station's table: the epoch-table columns, then the truth columns."""
+    df = pl.DataFrame(
+        [
+            pl.Series("time", time_us, dtype=pl.Int64).cast(pl.Datetime("us")),
+            *(pl.Series(k, cols[k]) for k in ("hpe", "vpe", "hpl", "vpl", "east", "north")),
+            pl.Series("nsv", nsv),
+            pl.Series("_sol", solution),
+        ]
+    )
+    df = df.select(
+        "time",
+        pl.lit(name, dtype=pl.String).cast(pl.Categorical).alias("station"),
+        "hpe",
+        "vpe",
+        "hpl",
+        "vpl",
+        "east",
+        "north",
+        pl.when(pl.col("_sol")).then(pl.col("nsv")).otherwise(None).cast(pl.Int16).alias("nsv"),
+        pl.when(pl.col("_sol")).then(pl.lit("PA")).otherwise(None).cast(pl.Categorical).alias("mode"),
+    )
+    truth = [pl.Series(k, cols[k]) for k in _TRUTH_ORDER if k in cols]
+    return df.hstack([*truth, pl.Series("regime", regime)])
 
 
 # --------------------------------------------------------------------------- files

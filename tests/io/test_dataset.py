@@ -103,3 +103,36 @@ def test_analyze_of_the_dataset_equals_analyze_of_the_file(network: Path, tmp_pa
         b["inputs"][0]["format"] == "dataset" and b["inputs"][0]["rows_read"] == a["inputs"][0]["rows_kept"]
     )
     assert (tmp_path / "ds" / MANIFEST).exists()
+
+
+def test_simulate_into_a_dataset_gives_the_simulators_station_days_byte_for_byte(tmp_path: Path) -> None:
+    """Each partition is today's simulation restricted to that station-day, written the same way."""
+    from overbound import __version__
+    from overbound.io.dataset import write_partition
+    from overbound.simulate import write_simulation_dataset
+
+    config = SimulationConfig(days=2.5, stations=2, interval_s=2.0, seed=3)
+    written = write_simulation_dataset(config, tmp_path / "ds")
+    sim = simulate(config)
+    truth = {t.name: t.to_dict() for t in sim.stations}
+    assert [p.key for p in written] == [p.key for p in partitions(tmp_path / "ds")] and len(written) == 2 * 3
+    for p in written:
+        day = sim.table.filter((pl.col("station") == p.station) & (pl.col("time").dt.date() == p.date))
+        generator = f"overbound.simulate {__version__}"
+        extra = {
+            "simulation": {"generator": generator, "config": config.to_dict(), "station": truth[p.station]}
+        }
+        reference = write_partition(tmp_path / "ref", day, extra=extra)
+        assert reference.path.read_bytes() == p.path.read_bytes(), p.key
+    assert sum(read(p.path)[0].height for p in written) == sim.table.height
+    manifest = read_manifest(tmp_path / "ds")
+    assert manifest["simulation"]["stations"] == [truth["SIM01"], truth["SIM02"]]
+
+
+def test_simulate_command_writes_a_dataset_for_a_directory(tmp_path: Path) -> None:
+    res = CliRunner().invoke(
+        main, ["simulate", "--days", "1.5", "--stations", "2", "--interval", "30", "-o", str(tmp_path / "ds")]
+    )
+    assert res.exit_code == 0, res.output
+    assert res.output.endswith("4 station-days of 2 stations (dataset)\n")
+    assert len(partitions(tmp_path / "ds")) == 4

@@ -46,9 +46,12 @@ __all__ = [
     "create_dataset",
     "ingest",
     "is_dataset",
+    "partition_path",
     "partitions",
     "read_dataset",
     "read_manifest",
+    "write_manifest",
+    "write_partition",
 ]
 
 #: The manifest's file name inside a dataset.
@@ -112,7 +115,7 @@ def create_dataset(path: str | Path) -> Path:
             str(p), "exists and is not an overbound dataset (no dataset.json); give a new directory"
         )
     p.mkdir(parents=True, exist_ok=True)
-    _write_manifest(p, {"schema": SCHEMA, "overbound_version": __version__, "stations": {}, "inputs": []})
+    write_manifest(p, {"schema": SCHEMA, "overbound_version": __version__, "stations": {}, "inputs": []})
     return p
 
 
@@ -187,7 +190,6 @@ def ingest(
     ``overbound analyze`` (a time repeated across them is an error).
     """
     from overbound.io.open import read as read_any
-    from overbound.io.table import write_epochs
     from overbound.output import locked
 
     root = create_dataset(dataset)
@@ -206,25 +208,52 @@ def ingest(
     with locked(root):
         manifest = read_manifest(root)
         for (station, day), part in days.group_by(["station", "_date"], maintain_order=True):
-            p = Partition(
-                str(station), day, root / f"station={station}" / f"date={day.isoformat()}" / "part-0.parquet"
-            )
-            if p.path.exists():
-                replaced.append(p.key)
-            p.path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = p.path.with_name(f".part-0.tmp-{os.getpid()}.parquet")
-            try:
-                # the input's report as provenance when there is one input (several: see the manifest)
-                write_epochs(part.drop("_date"), tmp, report=reports[0] if len(reports) == 1 else None)
-                os.replace(tmp, p.path)
-            finally:
-                with contextlib.suppress(FileNotFoundError):
-                    tmp.unlink()
+            if partition_path(root, str(station), day).exists():
+                replaced.append(Partition(str(station), day, root).key)
+            # the input's report as provenance when there is one input (several: see the manifest)
+            p = write_partition(root, part.drop("_date"), report=reports[0] if len(reports) == 1 else None)
             written.append(p)
             rows[p.key] = part.height
         _record(manifest, reports, written, reference, table)
-        _write_manifest(root, manifest)
+        write_manifest(root, manifest)
     return IngestResult(tuple(written), tuple(replaced), tuple(reports), rows)
+
+
+def partition_path(root: str | Path, station: str, day: dt.date) -> Path:
+    """The file of a station-day in the dataset at ``root``."""
+    return Path(root) / f"station={station}" / f"date={day.isoformat()}" / "part-0.parquet"
+
+
+def write_partition(
+    root: str | Path, table: pl.DataFrame, *, report: ReadReport | None = None, extra: dict | None = None
+) -> Partition:
+    """Write one station-day (``table`` holds one station and one GPS day) atomically.
+
+    The file is :func:`~overbound.io.table.write_epochs` of ``table`` (with ``report`` and
+    ``extra`` as its provenance), written under a temporary name in the partition's directory
+    and renamed over the old one. The caller holds the dataset's lock.
+
+    Raises
+    ------
+    ValueError
+        ``table`` is empty or spans several stations or days.
+    """
+    from overbound.io.table import write_epochs
+
+    stations = table["station"].unique()
+    days = table["time"].dt.date().unique()
+    if table.height == 0 or len(stations) != 1 or len(days) != 1:
+        raise ValueError(f"a partition is one station-day; got {len(stations)} stations, {len(days)} days")
+    p = Partition(str(stations[0]), days[0], partition_path(root, str(stations[0]), days[0]))
+    p.path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = p.path.with_name(f".part-0.tmp-{os.getpid()}.parquet")
+    try:
+        write_epochs(table, tmp, report=report, extra_metadata=extra)
+        os.replace(tmp, p.path)
+    finally:
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+    return p
 
 
 def _record(manifest: dict, reports, written, reference: Reference | None, table: pl.DataFrame) -> None:
@@ -243,7 +272,8 @@ def _record(manifest: dict, reports, written, reference: Reference | None, table
     manifest["overbound_version"] = __version__
 
 
-def _write_manifest(root: Path, doc: dict) -> None:
+def write_manifest(root: Path, doc: dict) -> None:
+    """Write the manifest ``doc`` atomically (the caller holds the dataset's lock)."""
     tmp = root / f".{MANIFEST}.tmp-{os.getpid()}"
     tmp.write_text(json.dumps(doc, indent=1, sort_keys=True) + "\n", encoding="utf-8")
     os.replace(tmp, root / MANIFEST)
