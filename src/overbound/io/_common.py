@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import polars as pl
 
-from overbound.io.gpstime import GPS_EPOCH, PLAUSIBLE_END, PLAUSIBLE_SPAN
+from overbound.io.gpstime import PLAUSIBLE_END_US, PLAUSIBLE_SPAN, PLAUSIBLE_START_US
 from overbound.io.schema import COLUMNS, InputError, ReadReport, as_numpy
 
 _DTYPES = {c.name: c.dtype for c in COLUMNS}
@@ -99,8 +99,7 @@ def _drop_implausible_times(df: pl.DataFrame, log: RowLog) -> pl.DataFrame:
     # Compared as integers (microseconds since 1970): a corrupted time can lie beyond what
     # polars' calendar code formats (it panics) or a Python datetime holds (year 0).
     us = df["time"].cast(pl.Datetime("us")).to_physical()
-    lo, hi = (int((x - _UNIX).total_seconds()) * 1_000_000 for x in (GPS_EPOCH, PLAUSIBLE_END))
-    bad = us.is_null() | (us < lo) | (us >= hi)
+    bad = us.is_null() | (us < PLAUSIBLE_START_US) | (us >= PLAUSIBLE_END_US)
     n_bad = int(bad.sum())
     if not n_bad:
         return df

@@ -10,26 +10,24 @@ turned into ``E`` (:func:`parse_float`).
 
 Input bytes come through :func:`load_bytes`: plain, gzip, and anything the ``hatanaka`` package
 undoes (Hatanaka compact RINEX, Unix ``.Z``, bzip2, zip). Times read from records are checked
-against the plausible span of GNSS epochs by :func:`plausible_gpst`.
+against the plausible span of GNSS epochs by :func:`overbound.io.gpstime.plausible_us`.
 """
 
 from __future__ import annotations
 
-import datetime as dt
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from overbound.io.gpstime import PLAUSIBLE_END, leap_seconds
+from overbound.io.gpstime import leap_seconds
 from overbound.io.open import Source, open_binary, source_name
 from overbound.io.schema import InputError
 
 __all__ = [
     "BLANK",
     "GPS_EPOCH_US",
-    "PLAUSIBLE_END_US",
     "US",
     "Lines",
     "civil_to_us",
@@ -37,7 +35,6 @@ __all__ = [
     "parse_digits",
     "parse_fixed",
     "parse_float",
-    "plausible_gpst",
     "rinex_version",
     "to_gpst",
 ]
@@ -45,8 +42,6 @@ __all__ = [
 US = 1_000_000
 #: 1980-01-06 00:00:00 in microseconds since 1970-01-01 (GPS time's origin on the table's axis).
 GPS_EPOCH_US = 315_964_800 * US
-#: :data:`overbound.io.gpstime.PLAUSIBLE_END` (exclusive) on the same axis.
-PLAUSIBLE_END_US = (PLAUSIBLE_END - dt.datetime(1970, 1, 1)) // dt.timedelta(microseconds=1)
 BLANK = ord(" ")
 _MINUS, _POINT = ord("-"), ord(".")
 _PAD = 512  # blank bytes after the text, so that every field window stays inside the buffer
@@ -298,13 +293,6 @@ def civil_to_us(
     ok &= (minute >= 0) & (minute <= 59) & (us >= 0) & (us <= 61 * US) & (year >= 1980) & (year < 2200)
     days = first.astype("datetime64[D]").astype(np.int64) + day - 1
     return ((days * 86_400 + hour * 3600 + minute * 60) * US + us).astype(np.int64), ok
-
-
-def plausible_gpst(t_us: np.ndarray) -> np.ndarray:
-    """Which GPS times (microseconds since 1970) lie in ``1980-01-06 <= t <`` :data:`PLAUSIBLE_END_US`
-    (:data:`overbound.io.gpstime.PLAUSIBLE_SPAN`): a time outside is a corrupted record."""
-    t_us = np.asarray(t_us, dtype=np.int64)
-    return (t_us >= GPS_EPOCH_US) & (t_us < PLAUSIBLE_END_US)
 
 
 def to_gpst(t_us: np.ndarray, time_system: str, name: str) -> np.ndarray:

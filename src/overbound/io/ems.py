@@ -36,7 +36,6 @@ refused with a clear message. A RINEX-B file given here is refused with a pointe
 
 from __future__ import annotations
 
-import datetime as dt
 from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -44,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 import polars as pl
 
-from overbound.io.gpstime import GPS_EPOCH, PLAUSIBLE_END, PLAUSIBLE_SPAN
+from overbound.io.gpstime import PLAUSIBLE_SPAN, plausible_us
 from overbound.io.open import Source, read_bytes, source_name
 from overbound.io.schema import InputError, ReadReport
 from overbound.sbas.bits import FRAME_BYTES, message_type
@@ -63,10 +62,6 @@ _SBAS_PRN = (120, 158)
 _REASONS = ("", "line_length", "layout", "bad_time", "not_sbas_prn", "type_mismatch", "time_out_of_range")
 _OK = 0
 _US = 1_000_000
-#: Times a message may carry (GPS time, microseconds since 1970-01-01): GPS_EPOCH <= t < PLAUSIBLE_END.
-_ERA_US = tuple(
-    (t - dt.datetime(1970, 1, 1)) // dt.timedelta(microseconds=1) for t in (GPS_EPOCH, PLAUSIBLE_END)
-)
 
 _HEX = np.full(256, -1, dtype=np.int16)
 for _i, _c in enumerate(b"0123456789ABCDEF"):
@@ -274,7 +269,7 @@ def _decode_lines(
     reason = np.zeros(len(mat), dtype=np.uint8)
     reason[mismatch] = _REASONS.index("type_mismatch")
     reason[(prn < _SBAS_PRN[0]) | (prn > _SBAS_PRN[1])] = _REASONS.index("not_sbas_prn")
-    reason[(time < _ERA_US[0]) | (time >= _ERA_US[1])] = _REASONS.index("time_out_of_range")
+    reason[~plausible_us(time)] = _REASONS.index("time_out_of_range")
     reason[bad_time] = _REASONS.index("bad_time")
     keep = reason == _OK
     frames = {

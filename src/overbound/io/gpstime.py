@@ -11,10 +11,13 @@ __all__ = [
     "GPS_EPOCH",
     "GPS_UTC_LEAP_SECONDS",
     "PLAUSIBLE_END",
+    "PLAUSIBLE_END_US",
     "PLAUSIBLE_SPAN",
+    "PLAUSIBLE_START_US",
     "PLAUSIBLE_YEARS",
     "gps_utc_offset",
     "leap_seconds",
+    "plausible_us",
     "utc_to_gpst",
 ]
 
@@ -30,6 +33,23 @@ PLAUSIBLE_END = dt.datetime(dt.datetime.now(dt.UTC).year + 2, 1, 1)
 PLAUSIBLE_YEARS = range(GPS_EPOCH.year, PLAUSIBLE_END.year)
 #: The span as rejection messages print it.
 PLAUSIBLE_SPAN = f"1980-01-06 to {PLAUSIBLE_END.year - 1}-12-31 (GPS)"
+#: :data:`GPS_EPOCH` and :data:`PLAUSIBLE_END` in microseconds since 1970-01-01 (the epoch table's
+#: time axis): every reader checks its times against these two integers.
+PLAUSIBLE_START_US, PLAUSIBLE_END_US = (
+    (t - dt.datetime(1970, 1, 1)) // dt.timedelta(microseconds=1) for t in (GPS_EPOCH, PLAUSIBLE_END)
+)
+
+
+def plausible_us(t_us: np.ndarray) -> np.ndarray:
+    """Which GPS times (microseconds since 1970) lie in :data:`PLAUSIBLE_SPAN`: a time outside is a
+    corrupted record.
+
+    >>> plausible_us(np.array([0, PLAUSIBLE_START_US, PLAUSIBLE_END_US])).tolist()
+    [False, True, False]
+    """
+    t_us = np.asarray(t_us, dtype=np.int64)
+    return (t_us >= PLAUSIBLE_START_US) & (t_us < PLAUSIBLE_END_US)
+
 
 #: GPS-UTC in seconds, in force from 00:00 UTC of each date on. Source: IERS Bulletin C
 #: (TAI-UTC, https://hpiers.obspm.fr/eoppc/bul/bulc/) minus TAI-GPS = 19 s. Bulletin C 69

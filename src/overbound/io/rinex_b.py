@@ -52,8 +52,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from overbound.io.ems import _ERA_US, _HEX, _frames_in_time_order, _gather, _join, _Lines, _report
-from overbound.io.gpstime import PLAUSIBLE_SPAN
+from overbound.io.ems import _HEX, _frames_in_time_order, _gather, _join, _Lines, _report
+from overbound.io.gpstime import PLAUSIBLE_SPAN, plausible_us
 from overbound.io.open import Source, read_bytes, source_name
 from overbound.io.schema import InputError, ReadReport
 from overbound.sbas.bits import FRAME_BYTES, message_type
@@ -269,7 +269,7 @@ class _Records:
         reason[~l1] = _R["not_l1"]
         reason[(prn < _SBAS_PRN[0]) | (prn > _SBAS_PRN[1])] = _R["not_sbas_prn"]
         epoch = time - _US  # the tag is the epoch's whole seconds + 1 s
-        reason[(epoch < _ERA_US[0]) | (epoch >= _ERA_US[1])] = _R["time_out_of_range"]
+        reason[~plausible_us(epoch)] = _R["time_out_of_range"]
         reason[bad_time] = _R["bad_time"]
         reason[~layout_ok] = _R["layout"]
         return _Records(idx, prn, time, nbytes, reason)

@@ -51,18 +51,16 @@ import polars as pl
 
 from overbound.io._rinex import (
     GPS_EPOCH_US,
-    PLAUSIBLE_END_US,
     US,
     Lines,
     civil_to_us,
     load_bytes,
     parse_digits,
     parse_float,
-    plausible_gpst,
     rinex_version,
     to_gpst,
 )
-from overbound.io.gpstime import PLAUSIBLE_SPAN, PLAUSIBLE_YEARS
+from overbound.io.gpstime import PLAUSIBLE_END_US, PLAUSIBLE_SPAN, PLAUSIBLE_YEARS, plausible_us
 from overbound.io.open import Source, source_name
 from overbound.io.schema import InputError, ReadReport
 from overbound.sbas.frames import REJECTED_SCHEMA
@@ -413,7 +411,7 @@ def _record_epochs(
         & np.logical_and.reduce([p[1] for p in parts])
     )
     t = to_gpst(t, "GPS", "")
-    return prn, t, ok, np.isin(year, PLAUSIBLE_YEARS) & plausible_gpst(t)
+    return prn, t, ok, np.isin(year, PLAUSIBLE_YEARS) & plausible_us(t)
 
 
 def _digits(mat: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

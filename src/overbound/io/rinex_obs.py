@@ -97,11 +97,10 @@ from overbound.io._rinex import (
     parse_digits,
     parse_fixed,
     parse_float,
-    plausible_gpst,
     rinex_version,
     to_gpst,
 )
-from overbound.io.gpstime import PLAUSIBLE_SPAN
+from overbound.io.gpstime import PLAUSIBLE_SPAN, plausible_us
 from overbound.io.open import Source, source_name
 from overbound.io.schema import InputError, ReadReport
 from overbound.sbas.frames import REJECTED_SCHEMA
@@ -634,7 +633,7 @@ def _epoch_times(
     t, date_ok = civil_to_us(year, *(p[0] for p in parts), us)
     ok = y_ok & s_ok & ~s_blank & date_ok & np.logical_and.reduce([p[1] for p in parts])
     t = to_gpst(np.where(ok, t, GPS_EPOCH_US), header.time_system, "")
-    ok &= plausible_gpst(t)  # 1980-01-06 to the present and a margin, in GPS time
+    ok &= plausible_us(t)  # 1980-01-06 to the present and a margin, in GPS time
     event = (flag >= 2) & (flag <= 5)
     undated = event & (lines.chars(cand, 0 if not v3 else 2, 26 if not v3 else 27) == ord(" ")).all(axis=1)
     clock, c_ok, _ = parse_fixed(lines.chars(cand, clock_col, clock_w), clock_d)

@@ -32,7 +32,13 @@ import polars as pl
 
 from overbound.io._common import RowLog, finalize_epochs
 from overbound.io.geodesy import Reference, enu_errors_ecef, enu_errors_geodetic
-from overbound.io.gpstime import PLAUSIBLE_END, PLAUSIBLE_SPAN, leap_seconds, utc_to_gpst
+from overbound.io.gpstime import (
+    PLAUSIBLE_END_US,
+    PLAUSIBLE_SPAN,
+    PLAUSIBLE_START_US,
+    leap_seconds,
+    utc_to_gpst,
+)
 from overbound.io.open import Source, open_text, source_name
 from overbound.io.schema import InputError, ReadReport
 
@@ -53,9 +59,6 @@ _FORMAT = "rtklib-pos"
 _GPS_EPOCH_UNIX_S = 315_964_800  # 1980-01-06T00:00:00 as seconds since 1970-01-01
 _WEEK_S = 604_800
 _US = 1_000_000
-#: Epochs outside [GPS epoch, 2100) are rejected as malformed: a corrupted year (0000, 9999) would
-#: otherwise span millennia and make the 1 Hz grids of the analysis allocate gigabytes (issue 13).
-_ERA_US = (_GPS_EPOCH_UNIX_S * _US, int(PLAUSIBLE_END.replace(tzinfo=dt.UTC).timestamp()) * _US)
 _JST_UTC_S = 9 * 3600  # JST = UTC + 9 h (RTKLIB TIMES_JST)
 _TIME_SYSTEMS = ("GPST", "UTC", "JST")
 _SEPARATORS = (",", ";", "|")  # non-blank field separators we undo (RTKLIB out-fieldsep)
@@ -447,7 +450,9 @@ def _parse_fields(raw: pl.DataFrame, header: PosHeader) -> pl.DataFrame:
     )
     reason = reason.when(time.is_null()).then(pl.format("malformed line: bad time '{} {}'", tok(0), tok(1)))
     t_us = time.dt.epoch("us")
-    reason = reason.when((t_us < _ERA_US[0]) | (t_us >= _ERA_US[1])).then(
+    # a corrupted year (0000, 9999) would otherwise span millennia and make the 1 Hz grids of the
+    # analysis allocate gigabytes (issue 13): a malformed line, before any time conversion
+    reason = reason.when((t_us < PLAUSIBLE_START_US) | (t_us >= PLAUSIBLE_END_US)).then(
         pl.format(f"malformed line: time '{{}} {{}}' outside {PLAUSIBLE_SPAN}", tok(0), tok(1))
     )
     for bad, why in checks:

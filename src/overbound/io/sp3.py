@@ -76,10 +76,9 @@ from overbound.io._rinex import (
     parse_digits,
     parse_fixed,
     parse_float,
-    plausible_gpst,
     to_gpst,
 )
-from overbound.io.gpstime import PLAUSIBLE_SPAN, PLAUSIBLE_YEARS
+from overbound.io.gpstime import PLAUSIBLE_SPAN, PLAUSIBLE_YEARS, plausible_us
 from overbound.io.open import Source, source_name
 from overbound.io.schema import InputError, ReadReport
 from overbound.sbas.frames import REJECTED_SCHEMA
@@ -401,7 +400,7 @@ def _epoch_status(
     t, _ = civil_to_us(year, *(p[0] for p in parts), us)
     t = to_gpst(t, time_system, name)
     reason = np.where(ok, 0, _CODE["bad_epoch"]).astype(np.int8)
-    reason[ok & ~(np.isin(year, PLAUSIBLE_YEARS) & plausible_gpst(t))] = _CODE["time_out_of_range"]
+    reason[ok & ~(np.isin(year, PLAUSIBLE_YEARS) & plausible_us(t))] = _CODE["time_out_of_range"]
     cand = np.flatnonzero(reason == 0)
     inc = _increasing(t[cand])
     late = cand[~inc]

@@ -55,7 +55,6 @@ pi. The 10-bit week of subframe 1 is resolved with the raw epochs' week.
 
 from __future__ import annotations
 
-import datetime as dt
 import math
 import re
 import struct
@@ -68,7 +67,7 @@ import polars as pl
 from pyubx2 import UBXReader
 
 from overbound.io._rinex import GPS_EPOCH_US, US
-from overbound.io.gpstime import GPS_EPOCH, PLAUSIBLE_END, PLAUSIBLE_SPAN
+from overbound.io.gpstime import PLAUSIBLE_END_US, PLAUSIBLE_SPAN, PLAUSIBLE_START_US
 from overbound.io.open import Source, read_bytes, source_name
 from overbound.io.schema import InputError, ReadReport
 from overbound.sbas.bits import FRAME_BYTES
@@ -86,8 +85,6 @@ _OBS_COLUMNS = ("C1C", "L1C", "D1C", "S1C")
 _URA = (2.4, 3.4, 4.85, 6.85, 9.65, 13.65, 24.0, 48.0, 96.0, 192.0, 384.0, 768.0, 1536.0, 3072.0, 6144.0,
         np.nan)  # fmt: skip
 _MARKERS = (b"computep",)
-#: Times a raw epoch may carry, GPS microseconds since 1970: GPS_EPOCH <= t < PLAUSIBLE_END.
-_ERA_US = (GPS_EPOCH_US, GPS_EPOCH_US + (PLAUSIBLE_END - GPS_EPOCH) // dt.timedelta(microseconds=1))
 _NMEA = re.compile(rb"[$!][\x20-\x7e]*\r?\n")
 _NMEA_CUT = re.compile(rb"[$!][\x20-\x7e]*\Z")  # the last sentence of a cut file
 _TOKEN = re.compile(rb"[^,\r\n]+")
@@ -391,7 +388,7 @@ class _State:
     def _epoch(self, week: int, tow_s: float, offset: int) -> int | None:
         """The epoch's time (us), or None when rejected (out of range, or a repeat)."""
         t = GPS_EPOCH_US + week * _WEEK_US + round(tow_s * US) if math.isfinite(tow_s) else None
-        if t is None or not (0 <= tow_s < 604_800 and _ERA_US[0] <= t < _ERA_US[1]):
+        if t is None or not (0 <= tow_s < 604_800 and PLAUSIBLE_START_US <= t < PLAUSIBLE_END_US):
             self.tally.reject("time_out_of_range", offset, content=True)
             return None
         if t in self.seen:
