@@ -12,7 +12,7 @@ import pytest
 from click.testing import CliRunner
 
 from overbound.cli import main
-from overbound.io.dataset import MANIFEST, create_dataset, ingest, partitions, read_dataset, read_manifest
+from overbound.io.dataset import MANIFEST, create_dataset, ingest, partitions, read_manifest
 from overbound.io.open import read
 from overbound.io.schema import InputError
 from overbound.simulate import SimulationConfig, simulate, write_simulation
@@ -77,7 +77,7 @@ def test_a_directory_that_is_not_a_dataset_is_refused(tmp_path: Path) -> None:
 
 def test_time_window_of_a_dataset_is_counted(network: Path, tmp_path: Path) -> None:
     ingest(tmp_path / "ds", [network])
-    table, report = read_dataset(tmp_path / "ds", time_range=(dt.datetime(2024, 1, 7, 12), None))
+    table, report = read(tmp_path / "ds", time_range=(dt.datetime(2024, 1, 7, 12), None))
     assert table["time"].min() >= dt.datetime(2024, 1, 7, 12)
     assert report.rejected["outside_time_range"] == report.rows_read - table.height > 0
     assert report.unaccounted == 0

@@ -208,10 +208,11 @@ def ingest(
     with locked(root):
         manifest = read_manifest(root)
         for (station, day), part in days.group_by(["station", "_date"], maintain_order=True):
-            if partition_path(root, str(station), day).exists():
-                replaced.append(Partition(str(station), day, root).key)
+            existed = partition_path(root, str(station), day).exists()
             # the input's report as provenance when there is one input (several: see the manifest)
             p = write_partition(root, part.drop("_date"), report=reports[0] if len(reports) == 1 else None)
+            if existed:
+                replaced.append(p.key)
             written.append(p)
             rows[p.key] = part.height
         _record(manifest, reports, written, reference, table)
@@ -280,57 +281,34 @@ def write_manifest(root: Path, doc: dict) -> None:
 
 
 def read_dataset(
-    path: str | Path,
-    *,
-    columns: Sequence[str] | None = None,
-    time_range: tuple[dt.datetime | None, dt.datetime | None] | None = None,
+    path: str | Path, *, columns: Sequence[str] | None = None
 ) -> tuple[pl.DataFrame, ReadReport]:
     """The whole epoch table of a dataset, and a report of what was read.
 
     The partitions are read in (station, day) order and concatenated: the same table as
-    the one of its inputs read together. ``columns`` keeps the required columns plus these;
-    ``time_range`` keeps ``start <= time < stop`` (the epochs outside counted as
-    ``outside_time_range``).
+    the one of its inputs read together. ``columns`` is that of
+    :func:`~overbound.io.table.read_parquet` (the other columns are not even read);
+    :func:`overbound.io.open.read` applies its column and time-window options on top, as for
+    any input.
 
     Raises
     ------
     InputError
         Not a dataset, no partition, or a partition that cannot be read (named).
     """
-    from overbound.io.schema import REQUIRED
     from overbound.io.table import read_parquet
 
     root = Path(path)
     parts = partitions(root)
     if not parts:
         raise InputError(str(root), "the dataset has no partition (ingest inputs first)")
-    tables = []
-    for p in parts:
-        t, _ = read_parquet(p.path, columns=columns)
-        tables.append(t)
-    table = pl.concat(tables, how="diagonal_relaxed")
-    if columns is not None:
-        keep = set(REQUIRED) | set(columns)
-        table = table.select([c for c in table.columns if c in keep])
-    n = table.height
-    rejected = {}
-    if time_range is not None:
-        start, stop = time_range
-        expr = pl.lit(True)
-        if start is not None:
-            expr &= pl.col("time") >= start
-        if stop is not None:
-            expr &= pl.col("time") < stop
-        table = table.filter(expr)
-        if n - table.height:
-            rejected["outside_time_range"] = n - table.height
+    table = pl.concat([read_parquet(p.path, columns=columns)[0] for p in parts], how="diagonal_relaxed")
     stations = sorted({p.station for p in parts})
     report = ReadReport(
         source=str(root),
         format="dataset",
-        rows_read=n,
+        rows_read=table.height,
         rows_kept=table.height,
-        rejected=rejected,
         notes=(
             f"{len(parts)} station-days of {len(stations)} stations ({', '.join(stations[:10])}"
             f"{', ...' if len(stations) > 10 else ''}); the read reports of its inputs are in {MANIFEST}",

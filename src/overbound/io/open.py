@@ -19,6 +19,7 @@ from typing import BinaryIO, TextIO
 
 import polars as pl
 
+from overbound.io.dataset import is_dataset, read_dataset
 from overbound.io.geodesy import Reference
 from overbound.io.schema import REQUIRED, InputError, ReadReport
 
@@ -220,20 +221,10 @@ def read(
     (table, report) : the epoch table (see :mod:`overbound.io.schema`) and a
         :class:`~overbound.io.schema.ReadReport` of rows read, kept and rejected.
     """
-    if isinstance(source, str | Path) and (format in (None, "dataset")) and _is_dataset(source):
-        from overbound.io.dataset import read_dataset
-
-        return read_dataset(source, columns=columns, time_range=time_range)
-    fmt = format or sniff(source)
-    readers = _readers()
-    if fmt not in readers:
-        raise InputError(source_name(source), f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}")
-    kwargs: dict = {"reference": reference, "station": station, "strict": strict}
-    if fmt in ("csv", "parquet"):
-        kwargs["mapping"] = mapping
-    if fmt == "parquet":
-        kwargs["columns"] = columns
-    table, report = readers[fmt](source, **kwargs)
+    if format is None and isinstance(source, str | Path) and is_dataset(source):
+        table, report = read_dataset(source, columns=columns)
+    else:
+        table, report = _read_one(source, format, reference, station, strict, mapping, columns)
     if columns is not None:
         keep = set(REQUIRED) | set(columns)
         table = table.select([c for c in table.columns if c in keep])
@@ -246,10 +237,20 @@ def read(
     return table, report
 
 
-def _is_dataset(path: str | Path) -> bool:
-    from overbound.io.dataset import is_dataset
-
-    return is_dataset(path)
+def _read_one(
+    source, format, reference, station, strict, mapping, columns
+) -> tuple[pl.DataFrame, ReadReport]:
+    """One file or stream, by the reader of its (given or sniffed) format."""
+    fmt = format or sniff(source)
+    readers = _readers()
+    if fmt not in readers:
+        raise InputError(source_name(source), f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}")
+    kwargs: dict = {"reference": reference, "station": station, "strict": strict}
+    if fmt in ("csv", "parquet"):
+        kwargs["mapping"] = mapping
+    if fmt == "parquet":
+        kwargs["columns"] = columns
+    return readers[fmt](source, **kwargs)
 
 
 def _filter_time(
