@@ -228,6 +228,13 @@ def failure_text(exc: BaseException) -> str:
     return f"{type(exc).__name__}{stage}: {exc}"
 
 
+def error_text(exc: BaseException) -> str:
+    """Our own messages as they are; one raised inside numpy or scipy (a root-finder meeting NaN)
+    as :func:`failure_text`, with the stage of ours that called it, since its text names neither."""
+    frames = traceback.extract_tb(exc.__traceback__)
+    return str(exc) if frames and frames[-1].filename.startswith(_PACKAGE) else failure_text(exc)
+
+
 def _confidence_axes(table: pl.DataFrame) -> tuple[str, ...]:
     """Vertical always; horizontal when the table has signed east/north errors."""
     has_en = {"east", "north"} <= set(table.columns) and table["east"].is_not_nan().any()

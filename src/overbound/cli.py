@@ -96,19 +96,9 @@ class _Group(click.Group):
         except (InputError, OutputError) as exc:
             _fail(str(exc))
         except (ValueError, ArithmeticError, RuntimeError) as exc:
-            _fail(_value_error_text(exc))
+            from overbound.analysis import error_text
 
-
-def _value_error_text(exc: BaseException) -> str:
-    """Our own messages as they are; one raised inside numpy or scipy (a root-finder meeting NaN)
-    with the stage of ours that called it, since its text names neither."""
-    import traceback
-
-    from overbound.analysis import failure_text
-
-    frames = traceback.extract_tb(exc.__traceback__)
-    ours = bool(frames) and frames[-1].filename.startswith(str(Path(__file__).parent))
-    return str(exc) if ours else failure_text(exc)
+            _fail(error_text(exc))
 
 
 def _fail(message: str) -> None:
@@ -547,12 +537,7 @@ def ingest(dataset, inputs, **inputs_opts) -> None:
 
     result = run(dataset, list(inputs), **_read_options(**inputs_opts))
     for r in result.reports:
-        console.print(
-            f"{r.source}: {r.rows_kept} epochs of {r.rows_read} rows ({r.format}); rejected {r.n_rejected} "
-            f"{dict(sorted(r.rejected.items()))}; invalidated {sum(r.invalidated.values())}",
-            highlight=False,
-            soft_wrap=True,
-        )
+        console.print(f"{r.source}: {_read_line(r)}", highlight=False, soft_wrap=True)
     replaced = set(result.replaced)
     for p in result.written:
         note = " (replaced)" if p.key in replaced else ""
@@ -579,10 +564,15 @@ def convert(source, out, **inputs_opts) -> None:
     with staged_files(out) as staged:
         table, report = read(source, **read_options)
         write_epochs(table, staged, report=report)
-    click.echo(
-        f"{out}: {report.rows_kept} epochs from {report.rows_read} rows ({report.format}); "
-        f"rejected {report.n_rejected} {dict(sorted(report.rejected.items()))}; "
-        f"invalidated {sum(report.invalidated.values())} {dict(sorted(report.invalidated.items()))}"
+    click.echo(f"{out}: {_read_line(report)}")
+
+
+def _read_line(r) -> str:
+    """What a reader did, on one line: epochs kept of rows read, rejected and invalidated by reason."""
+    return (
+        f"{r.rows_kept} epochs from {r.rows_read} rows ({r.format}); "
+        f"rejected {r.n_rejected} {dict(sorted(r.rejected.items()))}; "
+        f"invalidated {sum(r.invalidated.values())} {dict(sorted(r.invalidated.items()))}"
     )
 
 
