@@ -367,11 +367,7 @@ def _parse_sbasout(sbasout: pl.DataFrame, log: RowLog) -> tuple[pl.DataFrame, Co
     if not parts:
         return pl.DataFrame(schema=_SOLVED_SCHEMA), layouts
     df = pl.concat(parts).sort("_line")
-    t = (
-        pl.datetime(pl.col("year"), 1, 1)
-        + pl.duration(days=pl.col("doy") - 1, microseconds=(pl.col("sod") * 1e6).round().cast(pl.Int64))
-    ).cast(pl.Datetime("us"))
-    df = df.with_columns(t.alias("time"))
+    df = df.with_columns(_day_time().alias("time"))
     gps_us = (df["time"] - pl.select(_GPS_EPOCH.cast(pl.Datetime("us"))).item()).dt.total_microseconds()
     tow_us = (df["week"] * _WEEK_S * 1_000_000 + (df["tow"] * 1e6).round().cast(pl.Int64)).cast(pl.Int64)
     bad_time = ((gps_us - tow_us).abs() > _TIME_TOLERANCE_US).to_numpy()
@@ -408,17 +404,32 @@ def _check_rows(conv: pl.DataFrame, lay: SbasoutLayout, log: RowLog) -> pl.DataF
     return flagged.filter(~pl.col("_bad")).drop("_bad", "tok")
 
 
-def _time_fields_ok() -> pl.Expr:
-    """Year in the GNSS era, day of year, second of day and of week in range, week plausible:
-    a NaN or corrupted time field is a rejected line, not an error of the time arithmetic."""
+def _day_fields_ok() -> pl.Expr:
+    """Year in the GNSS era, day of year and second of day in range: a NaN or corrupted time
+    field is a rejected line, not an error of the time arithmetic (:func:`_day_time`)."""
     years = PLAUSIBLE_YEARS
     return (
         pl.col("year").is_between(years.start, years.stop - 1)
         & pl.col("doy").is_between(1, 366)
         & pl.col("sod").is_between(0.0, 86401.0, closed="left")
-        & pl.col("tow").is_between(0.0, float(_WEEK_S + 1), closed="left")
-        & pl.col("week").is_between(0, (years.stop - 1980) * 53)
     )
+
+
+def _time_fields_ok() -> pl.Expr:
+    """:func:`_day_fields_ok`, and the second of week in range and the week plausible."""
+    return (
+        _day_fields_ok()
+        & pl.col("tow").is_between(0.0, float(_WEEK_S + 1), closed="left")
+        & pl.col("week").is_between(0, (PLAUSIBLE_YEARS.stop - 1980) * 53)
+    )
+
+
+def _day_time() -> pl.Expr:
+    """GPS time from the ``year``, ``doy`` and ``sod`` (seconds of day) columns."""
+    return (
+        pl.datetime(pl.col("year"), 1, 1)
+        + pl.duration(days=pl.col("doy") - 1, microseconds=(pl.col("sod") * 1e6).round().cast(pl.Int64))
+    ).cast(pl.Datetime("us"))
 
 
 def _why(row: dict, lay: SbasoutLayout) -> str:
@@ -445,30 +456,38 @@ def _why(row: dict, lay: SbasoutLayout) -> str:
 def _no_solution_rows(info: pl.DataFrame, log: RowLog) -> tuple[pl.DataFrame, Counter]:
     """Epochs gLAB gave up on, from its timestamped INFO lines; each one is a row read, and
     one that does not parse (or whose time is out of range) is rejected as a malformed line."""
-    rows: list[tuple[int, int, int, float, str]] = []
+    rows: list[tuple[int, int, int, float, str, str]] = []
     anchors = pl.any_horizontal([pl.col("text").str.contains(a, literal=True) for a in _NOSOL_ANCHORS])
     # INFO lines are few (one per skipped epoch plus the header); a regex per line is clear here.
     for line, text in info.filter(anchors).iter_rows():
         log.rows_read += 1
         m = _NOSOL.match(text) or _NOSOL_MATRIX.match(text)
-        if m and _plausible_day(int(m.group(1)), int(m.group(2)), float(m.group(3))):
-            rows.append((line, int(m.group(1)), int(m.group(2)), float(m.group(3)), _reason(m.group("why"))))
+        if m:
+            year, doy, sod = int(m.group(1)), int(m.group(2)), float(m.group(3))
+            rows.append((line, year, doy, sod, _reason(m.group("why")), text))
         else:
-            log.reject(line, f"malformed line: no-solution INFO line that does not parse: {text[:60]!r}")
+            log.reject(line, _unparsed(text))
     df = pl.DataFrame(
         rows,
-        schema={"_line": pl.Int64, "year": pl.Int64, "doy": pl.Int64, "sod": pl.Float64, "why": pl.String},
+        schema={
+            "_line": pl.Int64,
+            "year": pl.Int64,
+            "doy": pl.Int64,
+            "sod": pl.Float64,
+            "why": pl.String,
+            "text": pl.String,
+        },
         orient="row",
     )
+    ok = df.select(_day_fields_ok()).to_series()
+    for line, text in df.filter(~ok).select("_line", "text").iter_rows():
+        log.reject(line, _unparsed(text))
+    df = df.filter(ok)
     reasons = Counter(df["why"].to_list())
-    t = (
-        pl.datetime(pl.col("year"), 1, 1)
-        + pl.duration(days=pl.col("doy") - 1, microseconds=(pl.col("sod") * 1e6).round().cast(pl.Int64))
-    ).cast(pl.Datetime("us"))
     nan = pl.lit(float("nan"))
     out = df.select(
         "_line",
-        t.alias("time"),
+        _day_time().alias("time"),
         *(nan.alias(c) for c in ("east", "north", "hpe", "vpe", "hpl", "vpl")),
         pl.lit(None, pl.Int64).alias("nsv"),
         pl.lit(None, pl.String).alias("mode"),
@@ -477,10 +496,8 @@ def _no_solution_rows(info: pl.DataFrame, log: RowLog) -> tuple[pl.DataFrame, Co
     return out, reasons
 
 
-def _plausible_day(year: int, doy: int, sod: float) -> bool:
-    """A GNSS-era date (:data:`~overbound.io.gpstime.PLAUSIBLE_YEARS`) with a day of year and a
-    second of day in range."""
-    return year in PLAUSIBLE_YEARS and 1 <= doy <= 366 and 0 <= sod < 86401
+def _unparsed(text: str) -> str:
+    return f"malformed line: no-solution INFO line that does not parse: {text[:60]!r}"
 
 
 def _reason(why: str) -> str:
