@@ -41,6 +41,7 @@ def test_a_root_finder_meeting_nan_fails_its_section_not_the_run(tmp_path: Path,
     assert summary["parametric"], "the parametric analysis still ran"
     html = (out / "report.html").read_text()
     assert 'id="confidence-vertical"' in html and "Not computed: a numerical step failed" in html
+    assert ">Vertical PL confidence (failed)</a>" in html and ">Horizontal PL confidence (failed)</a>" in html
     assert not (out / "confidence-vertical.json").exists()
     assert "confidence vertical: not computed: ValueError" in res.output
     # the verdicts say what is missing, and no PL-bounding pass rests on the absent check

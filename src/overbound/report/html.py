@@ -234,7 +234,7 @@ def _header(a: Analysis) -> str:
             ("accuracy", "Accuracy"),
             *((_service_id(g[0]), " and ".join(s.name for s in g)) for g in service_groups(a.services)),
             *((f"confidence-{c.axis}", f"{c.axis.capitalize()} PL confidence") for c in a.confidence),
-            *((f"{m}-{axis}", f"{m.capitalize()} (failed)") for m, axis, _ in a.method_failures),
+            *((f"{m}-{axis}", _failure_label(m, axis)) for m, axis, _ in a.method_failures),
             *((f"evt-{axis}", f"{axis.capitalize()} EVT") for axis, _ in _evt_items(a)),
             *(
                 (sid, f"{sid.removeprefix('parametric-').capitalize()} parametric")
@@ -257,6 +257,12 @@ _FAILED_METHOD = {
     "confidence": "PL confidence level (Comby et al. 2003)",
     "parametric": "Parametric availability, integrity and continuity (Kannemans 2006)",
 }
+
+
+def _failure_label(method: str, axis: str) -> str:
+    """The contents link of a failed method: ``Vertical PL confidence (failed)``."""
+    what = {"confidence": "PL confidence"}.get(method, method)
+    return f"{what.capitalize() if axis == 'both' else f'{axis.capitalize()} {what}'} (failed)"
 
 
 def _failure_section(method: str, axis: str, reason: str) -> str:
