@@ -383,11 +383,10 @@ def continuity_risk(time_us: np.ndarray, available: np.ndarray, *, window_s: flo
 
 def _continuity_on_grid(grid: SlotGrid | None, available: np.ndarray, window_s: float) -> ContinuityResult:
     if grid is None:
-        return ContinuityResult(None, 0, 0, 0, 0, window_s, None, 0, "fewer than two epochs")
-    if grid.interval_s > window_s:
-        reason = f"sampling interval {grid.interval_s:g} s exceeds the {window_s:g} s exposure time"
-        return ContinuityResult(None, 0, 0, 0, 0, window_s, grid.interval_s, grid.n_off_grid, reason)
-    w = max(1, round(window_s / grid.interval_s))
+        return no_grid_continuity(None, 0, window_s)
+    if none := no_grid_continuity(grid.interval_s, grid.n_off_grid, window_s):
+        return none
+    w = window_slots(window_s, grid.interval_s)
     up = np.zeros(grid.size, dtype=bool)  # slot holds an available epoch
     up[grid.index] = available
     lost_prefix = prefix_counts(~up)  # a slot is lost when it is a gap or unavailable
@@ -402,6 +401,13 @@ def _continuity_on_grid(grid: SlotGrid | None, available: np.ndarray, window_s: 
     n_gap = int(np.count_nonzero(starts & (gp[w + 1 : w + 1 + k_max] != gp[1 : 1 + k_max])))
     n = int(np.count_nonzero(starts))
     n_truncated = int(np.count_nonzero(up[k_max:]))
+    return continuity_result(n, n_fail, n_gap, n_truncated, window_s, grid.interval_s, grid.n_off_grid)
+
+
+def continuity_result(
+    n: int, n_fail: int, n_gap: int, n_truncated: int, window_s: float, interval_s: float, n_off_grid: int
+) -> ContinuityResult:
+    """The :class:`ContinuityResult` of one station's window counts (whole or merged from days)."""
     return ContinuityResult(
         n_fail / n if n else None,
         n,
@@ -409,13 +415,29 @@ def _continuity_on_grid(grid: SlotGrid | None, available: np.ndarray, window_s: 
         n_gap,
         n_truncated,
         window_s,
-        grid.interval_s,
-        grid.n_off_grid,
+        interval_s,
+        n_off_grid,
         "" if n else "no window starts on an available epoch",
     )
 
 
-def _sum_continuity(parts: list[ContinuityResult], window_s: float) -> ContinuityResult:
+def no_grid_continuity(interval_s: float | None, n_off_grid: int, window_s: float) -> ContinuityResult | None:
+    """The result when no window can be counted (no grid, or an interval longer than the
+    window), else ``None``."""
+    if interval_s is None:
+        return ContinuityResult(None, 0, 0, 0, 0, window_s, None, 0, "fewer than two epochs")
+    if interval_s > window_s:
+        reason = f"sampling interval {interval_s:g} s exceeds the {window_s:g} s exposure time"
+        return ContinuityResult(None, 0, 0, 0, 0, window_s, interval_s, n_off_grid, reason)
+    return None
+
+
+def window_slots(window_s: float, interval_s: float) -> int:
+    """Grid slots after a window's start that the window holds: ``round(T/Δ)``, at least one."""
+    return max(1, round(window_s / interval_s))
+
+
+def sum_continuity(parts: list[ContinuityResult], window_s: float) -> ContinuityResult:
     """Pool per-station counts: windows never span two stations."""
     if len(parts) == 1:
         return parts[0]
@@ -469,6 +491,48 @@ def count_kpis(
     as not to be used) is unavailable for every service: its PLs count as infinite, so
     it lands in the ``unavailable`` region, and it is left out of the safety index.
     """
+    x = epoch_arrays(table)
+    pe, pls, ok, time_us = x.pe, x.pls, x.ok, x.time_us
+    stations = _station_slices(table)
+    counter = _Counter(pe, pls, [(idx, slot_grid(time_us[idx])) for idx in stations.values()])
+    out_services = {s.name: counter.service(s) for s in services}
+    hist = {
+        key: stanford_histogram(pe[key[0]], pls[key[0]], axis=key[0], max_value=key[1], bins=histogram_bins)
+        for key in histogram_keys(services, histogram_bins)
+    }
+    return CountingResult(
+        n_total=table.height,
+        n_with_solution=int(np.count_nonzero(ok)),
+        stations=tuple(stations),
+        start=_iso(int(time_us.min())) if time_us.size else None,
+        end=_iso(int(time_us.max())) if time_us.size else None,
+        hpe95=_percentile95(pe["horizontal"][ok]),
+        vpe95=_percentile95(pe["vertical"][ok]),
+        safety={axis: safety_index(pe[axis], x.si_pls[axis], time_us) for axis in AXES},
+        services=out_services,
+        histograms=hist,
+        by_station=_by_station(table, services) if by_station and len(stations) > 1 else {},
+    )
+
+
+@dataclass(frozen=True, slots=True)
+class EpochArrays:
+    """The arrays the counting reads from an epoch table.
+
+    ``pe``: HPE and |VPE| per axis; ``pls``: HPL and VPL, +inf where the receiver alerted (so
+    the epoch is unavailable for every service); ``si_pls``: the PLs of the safety index, NaN
+    where alerted (left out); ``ok``: epochs with finite HPE, VPE, HPL and VPL.
+    """
+
+    pe: dict[str, np.ndarray]
+    pls: dict[str, np.ndarray]
+    si_pls: dict[str, np.ndarray]
+    ok: np.ndarray
+    time_us: np.ndarray
+
+
+def epoch_arrays(table: pl.DataFrame) -> EpochArrays:
+    """:class:`EpochArrays` of ``table`` (zero-copy views where the columns allow)."""
     hpe = as_numpy(table["hpe"])
     vpe = as_numpy(table["vpe"])
     vpe = np.abs(vpe, out=vpe) if vpe.flags.writeable else np.abs(vpe)  # in place when already a copy
@@ -479,34 +543,68 @@ def count_kpis(
     if alert is not None:
         si_pls = {a: np.where(alert, np.nan, x) for a, x in si_pls.items()}
         hpl, vpl = (np.where(alert & ~np.isnan(x), np.inf, x) for x in (hpl, vpl))
-    time_us = as_numpy(table["time"])
-    stations = _station_slices(table)
     ok = np.isfinite(hpe) & np.isfinite(vpe) & np.isfinite(hpl) & np.isfinite(vpl)
     pe = {"horizontal": hpe, "vertical": vpe}
     pls = {"horizontal": hpl, "vertical": vpl}
-    counter = _Counter(pe, pls, [(idx, slot_grid(time_us[idx])) for idx in stations.values()])
-    out_services = {s.name: counter.service(s) for s in services}
-    hist = {}
+    return EpochArrays(pe, pls, si_pls, ok, as_numpy(table["time"]))
+
+
+def histogram_keys(services, bins: int) -> list[tuple[str, float]]:
+    """The ``(axis, plot maximum)`` of each Stanford histogram drawn for ``services``, in order."""
+    keys = [
+        (axis, plot_max(al)) for s in services for axis in AXES if (al := s.alert_limit(axis)) is not None
+    ]
+    return list(dict.fromkeys(keys)) if bins else []
+
+
+def continuity_keys(services) -> dict[tuple, list[float]]:
+    """Each availability mask whose continuity is counted, with its windows (s), in order.
+
+    ``(axis, AL)`` for an axis, ``("combined", HAL, VAL)`` for both: services sharing alert
+    limits and window (APV-I and LPV) share one count.
+    """
+    out: dict[tuple, list[float]] = {}
     for s in services:
-        for axis in AXES:
-            al = s.alert_limit(axis)
-            if histogram_bins and al is not None and (axis, plot_max(al)) not in hist:
-                hist[(axis, plot_max(al))] = stanford_histogram(
-                    pe[axis], pls[axis], axis=axis, max_value=plot_max(al), bins=histogram_bins
-                )
-    return CountingResult(
-        n_total=table.height,
-        n_with_solution=int(np.count_nonzero(ok)),
-        stations=tuple(stations),
-        start=_iso(int(time_us.min())) if time_us.size else None,
-        end=_iso(int(time_us.max())) if time_us.size else None,
-        hpe95=_percentile95(hpe[ok]),
-        vpe95=_percentile95(vpe[ok]),
-        safety={axis: safety_index(pe[axis], si_pls[axis], time_us) for axis in AXES},
-        services=out_services,
-        histograms=hist,
-        by_station=_by_station(table, services) if by_station and len(stations) > 1 else {},
-    )
+        keys = [(axis, al) for axis in AXES if (al := s.alert_limit(axis)) is not None]
+        for key in (*keys, ("combined", s.hal, s.val)):
+            windows = out.setdefault(key, [])
+            if s.continuity_window_s not in windows:
+                windows.append(s.continuity_window_s)
+    return out
+
+
+def availability_mask(pls: dict[str, np.ndarray], key: tuple) -> np.ndarray:
+    """Epochs available under a :func:`continuity_keys` key (PL < AL, on both axes when combined)."""
+    if key[0] != "combined":
+        return pls[key[0]] < key[1]
+    _, hal, val = key
+    h = pls["horizontal"] < hal
+    return h & (pls["vertical"] < val) if val is not None else h
+
+
+def service_kpi(
+    s: ServiceLevel,
+    n_total: int,
+    n_available: dict[tuple, int],
+    counts: dict[tuple, StanfordCounts],
+    continuity,
+) -> ServiceKPI:
+    """The :class:`ServiceKPI` of ``s`` from counts per :func:`continuity_keys` key;
+    ``continuity(key, window_s)`` gives the continuity of a mask."""
+    axes: dict[str, AxisKPI] = {}
+    for axis in AXES:
+        al = s.alert_limit(axis)
+        if al is None:
+            axes[axis] = AxisKPI(axis, None, None, 0, None, None)
+            continue
+        k = n_available[(axis, al)]
+        cont = continuity((axis, al), s.continuity_window_s)
+        axes[axis] = AxisKPI(axis, al, k / n_total if n_total else None, k, cont, counts[(axis, al)])
+    key = ("combined", s.hal, s.val)
+    k = n_available[key]
+    cont = continuity(key, s.continuity_window_s)
+    combined = AxisKPI("combined", None, k / n_total if n_total else None, k, cont, None)
+    return ServiceKPI(s, axes["horizontal"], axes["vertical"], combined)
 
 
 def _by_station(table: pl.DataFrame, services: tuple[ServiceLevel, ...] | list[ServiceLevel]) -> dict:
@@ -551,35 +649,33 @@ class _Counter:
 
     def __post_init__(self) -> None:
         self._cache: dict[tuple, ContinuityResult] = {}
+        self._masks: dict[tuple, np.ndarray] = {}
         # AL-independent masks of each axis, shared by all services
         self._no_solution = {a: np.isnan(self.pe[a]) | np.isnan(self.pls[a]) for a in AXES}
         self._above = {a: self.pe[a] > self.pls[a] for a in AXES}
 
-    def continuity(self, key: tuple, avail: np.ndarray, window_s: float) -> ContinuityResult:
+    def mask(self, key: tuple) -> np.ndarray:
+        if key not in self._masks:
+            self._masks[key] = availability_mask(self.pls, key)
+        return self._masks[key]
+
+    def continuity(self, key: tuple, window_s: float) -> ContinuityResult:
         if (key, window_s) not in self._cache:
+            avail = self.mask(key)
             parts = [_continuity_on_grid(g, avail[idx], window_s) for idx, g in self.grids]
             self._cache[(key, window_s)] = (
-                _sum_continuity(parts, window_s)
+                sum_continuity(parts, window_s)
                 if parts
                 else ContinuityResult(None, 0, 0, 0, 0, window_s, None, 0, "no epochs")
             )
         return self._cache[(key, window_s)]
 
     def service(self, s: ServiceLevel) -> ServiceKPI:
-        axes: dict[str, AxisKPI] = {}
-        masks: dict[str, np.ndarray] = {}
-        for axis in AXES:
-            al = s.alert_limit(axis)
-            if al is None:
-                axes[axis] = AxisKPI(axis, None, None, 0, None, None)
-                continue
-            masks[axis] = self.pls[axis] < al
-            n, k = masks[axis].size, int(np.count_nonzero(masks[axis]))
-            cont = self.continuity((axis, al), masks[axis], s.continuity_window_s)
-            counts = _counts(self.pe[axis], self.pls[axis], al, self._no_solution[axis], self._above[axis])
-            axes[axis] = AxisKPI(axis, al, k / n if n else None, k, cont, counts)
-        both = masks["horizontal"] & masks["vertical"] if "vertical" in masks else masks["horizontal"]
-        n, k = len(both), int(np.count_nonzero(both))
-        cont = self.continuity(("combined", s.hal, s.val), both, s.continuity_window_s)
-        combined = AxisKPI("combined", None, k / n if n else None, k, cont, None)
-        return ServiceKPI(s, axes["horizontal"], axes["vertical"], combined)
+        keys = [(a, al) for a in AXES if (al := s.alert_limit(a)) is not None]
+        keys.append(("combined", s.hal, s.val))
+        n_avail = {k: int(np.count_nonzero(self.mask(k))) for k in keys}
+        counts = {
+            (a, al): _counts(self.pe[a], self.pls[a], al, self._no_solution[a], self._above[a])
+            for a, al in keys[:-1]
+        }
+        return service_kpi(s, self.pe["horizontal"].size, n_avail, counts, self.continuity)

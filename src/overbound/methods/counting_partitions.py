@@ -1,0 +1,616 @@
+"""The counting KPIs of an epoch table split into partitions (station-days), merged exactly.
+
+:func:`~overbound.methods.counting.count_kpis` needs the whole table in memory. A campaign of
+many station-years is instead read one partition at a time (one station, one GPS day), each
+reduced to a small partial result; the partials merge, and the merged result is finalized into
+the same :class:`~overbound.methods.counting.CountingResult`, equal to ``count_kpis`` of the
+pooled table: counts identical, probabilities and percentiles to the last bit. Two passes:
+
+1. :func:`first_pass` per partition: epoch and region counts, available epochs per mask, the
+   Stanford histograms, the safety-index maximum with its epoch, the time steps' value counts,
+   the first and last epoch, the bin counts of the percentile variables
+   (:mod:`overbound.stats.mergeable`) and the per-day counts. Partials merge by
+   :func:`merge_first` (associative; order kept, so ties resolve as in one table).
+2. :func:`plan_second` finds, from the merged first pass, each station's time grid (the
+   nominal interval of all its steps, day boundaries included, and its first epoch: the grid
+   of :func:`~overbound.stats.dependence.slot_grid` on the whole station) and the bins holding
+   each percentile's order statistics. :func:`second_pass` per partition counts the continuity
+   windows that lie inside it and keeps the grid slots at its two ends, plus the values in the
+   percentile bins; :func:`merge_second` gathers them.
+3. :func:`finalize` counts the windows that cross partition boundaries from the kept end
+   slots (a window that crosses midnight is counted once, with the slots of the next day and
+   any gap between), and computes the exact percentiles.
+
+Choices
+-------
+- Two epochs of one station may fall in the same grid slot on either side of a partition
+  boundary (time-tag jitter at midnight). In one table the later one sets the slot's state
+  (numpy's fancy assignment, last write wins); here the earlier partition is told by the plan
+  to leave that slot to the next (``drop_last``), which gives the same slot states. Its epochs
+  still count in ``n_off_grid``.
+- Percentile variables: HPE and |VPE| over epochs with a solution (HPE95, |VPE|95), and the
+  safety index of each axis (its :data:`~overbound.methods.counting.SAFETY_PERCENTILES`).
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import polars as pl
+
+from overbound.methods.counting import (
+    AXES,
+    SAFETY_PERCENTILES,
+    CountingResult,
+    SafetyIndex,
+    StanfordCounts,
+    StanfordHistogram,
+    _counts,
+    _iso,
+    availability_mask,
+    continuity_keys,
+    continuity_result,
+    epoch_arrays,
+    histogram_keys,
+    no_grid_continuity,
+    service_kpi,
+    stanford_histogram,
+    sum_continuity,
+    window_slots,
+)
+from overbound.services import ServiceLevel
+from overbound.stats.dependence import interval_from_steps, prefix_counts, step_counts
+from overbound.stats.mergeable import (
+    BinCounts,
+    bin_counts,
+    exact_percentile,
+    merge_counts,
+    rank_bins,
+    values_in_bins,
+)
+
+__all__ = [
+    "FirstPass",
+    "SecondPass",
+    "SecondPlan",
+    "count_partitioned",
+    "daily_availability",
+    "finalize",
+    "first_pass",
+    "merge_first",
+    "merge_second",
+    "plan_second",
+    "second_pass",
+]
+
+#: The percentile variables and their percentiles.
+PERCENTILES: dict[str, tuple[float, ...]] = {
+    "hpe": (95.0,),
+    "vpe": (95.0,),
+    "si_horizontal": SAFETY_PERCENTILES,
+    "si_vertical": SAFETY_PERCENTILES,
+}
+_REGION_FIELDS = ("normal", "mi", "hmi", "unavailable", "unavailable_mi", "no_solution")
+_DAY_US = 86_400_000_000
+
+
+# --------------------------------------------------------------------------------------------------
+# pass 1
+
+
+@dataclass
+class StationFirst:
+    """Pass-1 partial of one station over one or more of its partitions (in time order).
+
+    ``spans``: first and last epoch (µs) of each partition; ``steps``: value counts of the time
+    steps inside partitions; ``n_available`` and ``regions`` per :func:`continuity_keys` key
+    (regions as the six :class:`StanfordCounts` fields); ``si_max`` per axis ``(value, time)``;
+    ``bins`` per percentile variable; ``days``: per GPS day number, epochs and available epochs
+    per combined key.
+    """
+
+    spans: list[tuple[int, int]]
+    steps: tuple[np.ndarray, np.ndarray]
+    n_total: int
+    n_ok: int
+    n_available: dict[tuple, int]
+    regions: dict[tuple, np.ndarray]
+    si_n: dict[str, int]
+    si_max: dict[str, tuple[float, int] | None]
+    bins: dict[str, BinCounts]
+    days: dict[int, np.ndarray]
+
+
+@dataclass
+class FirstPass:
+    """Pass-1 partial of a set of partitions: per station, plus the network's histograms
+    (sparse flat bin indices and counts, and the clipped count, per histogram key)."""
+
+    stations: dict[str, StationFirst]
+    histograms: dict[tuple[str, float], tuple[np.ndarray, np.ndarray, int]] = field(default_factory=dict)
+
+
+def _percentile_values(x) -> dict[str, np.ndarray]:
+    """The values of each percentile variable (as :func:`count_kpis` and :func:`safety_index`)."""
+    out = {"hpe": x.pe["horizontal"][x.ok], "vpe": x.pe["vertical"][x.ok]}
+    for axis in AXES:
+        pl_ = x.si_pls[axis]
+        ok = np.isfinite(x.pe[axis]) & np.isfinite(pl_) & (pl_ > 0)
+        si = np.abs(x.pe[axis][ok])
+        si /= pl_[ok]
+        out[f"si_{axis}"] = si
+    return out
+
+
+def _station_of(table: pl.DataFrame) -> str:
+    names = table["station"].cast(pl.String).unique().to_list()
+    if len(names) != 1:
+        raise ValueError(f"a partition holds one station, got {sorted(names)}")
+    return names[0]
+
+
+def first_pass(
+    table: pl.DataFrame, services: Sequence[ServiceLevel], *, histogram_bins: int = 200
+) -> FirstPass:
+    """Pass 1 on one partition: a table of one station, sorted by time (empty: no station)."""
+    if table.is_empty():
+        return FirstPass({}, {})
+    x = epoch_arrays(table)
+    keys = continuity_keys(services)
+    masks = {k: availability_mask(x.pls, k) for k in keys}
+    no_sol = {a: np.isnan(x.pe[a]) | np.isnan(x.pls[a]) for a in AXES}
+    above = {a: x.pe[a] > x.pls[a] for a in AXES}
+    regions = {
+        k: np.array(astuple_counts(_counts(x.pe[k[0]], x.pls[k[0]], k[1], no_sol[k[0]], above[k[0]])))
+        for k in keys
+        if k[0] != "combined"
+    }
+    values = _percentile_values(x)
+    t = x.time_us
+    day = t // _DAY_US
+    d0 = int(day[0])
+    combined = [k for k in keys if k[0] == "combined"]
+    per_day = np.stack(
+        [np.bincount(day - d0)] + [np.bincount(day - d0, weights=masks[k]).astype(np.int64) for k in combined]
+    )
+    days = {d0 + i: per_day[:, i].astype(np.int64) for i in np.flatnonzero(per_day[0])}
+    station = StationFirst(
+        spans=[(int(t[0]), int(t[-1]))],
+        steps=step_counts(np.diff(t)),
+        n_total=table.height,
+        n_ok=int(np.count_nonzero(x.ok)),
+        n_available={k: int(np.count_nonzero(m)) for k, m in masks.items()},
+        regions=regions,
+        si_n={a: int(values[f"si_{a}"].size) for a in AXES},
+        si_max={a: _si_max(x, a, values[f"si_{a}"]) for a in AXES},
+        bins={v: bin_counts(values[v]) for v in PERCENTILES},
+        days=days,
+    )
+    hist = {}
+    for key in histogram_keys(services, histogram_bins):
+        h = stanford_histogram(
+            x.pe[key[0]], x.pls[key[0]], axis=key[0], max_value=key[1], bins=histogram_bins
+        )
+        flat = h.counts.ravel()
+        nz = np.flatnonzero(flat)
+        hist[key] = (nz, flat[nz].astype(np.int64), h.clipped)
+    return FirstPass({_station_of(table): station}, hist)
+
+
+def astuple_counts(c: StanfordCounts) -> tuple[int, ...]:
+    return tuple(getattr(c, f) for f in _REGION_FIELDS)
+
+
+def _si_max(x, axis: str, si: np.ndarray) -> tuple[float, int] | None:
+    if si.size == 0:
+        return None
+    pl_ = x.si_pls[axis]
+    ok = np.flatnonzero(np.isfinite(x.pe[axis]) & np.isfinite(pl_) & (pl_ > 0))
+    i = int(np.argmax(si))
+    return float(si[i]), int(x.time_us[ok[i]])
+
+
+def _add_dicts(a: dict, b: dict) -> dict:
+    out = dict(a)
+    for k, v in b.items():
+        out[k] = out[k] + v if k in out else v
+    return out
+
+
+def _merge_station(a: StationFirst, b: StationFirst) -> StationFirst:
+    """``a`` then ``b`` (``b``'s partitions later in time)."""
+    steps = merge_counts(BinCounts(*a.steps), BinCounts(*b.steps))
+    return StationFirst(
+        spans=a.spans + b.spans,
+        steps=(steps.bins.astype(np.int64), steps.counts),
+        n_total=a.n_total + b.n_total,
+        n_ok=a.n_ok + b.n_ok,
+        n_available=_add_dicts(a.n_available, b.n_available),
+        regions=_add_dicts(a.regions, b.regions),
+        si_n=_add_dicts(a.si_n, b.si_n),
+        si_max={ax: _later_max(a.si_max[ax], b.si_max[ax]) for ax in AXES},
+        bins={v: merge_counts(a.bins[v], b.bins[v]) for v in PERCENTILES},
+        days=_add_dicts(a.days, b.days),
+    )
+
+
+def _later_max(a: tuple[float, int] | None, b: tuple[float, int] | None) -> tuple[float, int] | None:
+    """The maximum of ``a`` (earlier in table order) and ``b``; ``a`` on a tie, as ``argmax``."""
+    if a is None or (b is not None and b[0] > a[0]):
+        return b
+    return a
+
+
+def merge_first(*parts: FirstPass) -> FirstPass:
+    """The pass-1 partial of ``parts`` together, given in table order (station, then time)."""
+    stations: dict[str, StationFirst] = {}
+    hist: dict = {}
+    for p in parts:
+        for name, st in p.stations.items():
+            stations[name] = _merge_station(stations[name], st) if name in stations else st
+        for key, (idx, counts, clipped) in p.histograms.items():
+            if key in hist:
+                merged = merge_counts(BinCounts(hist[key][0], hist[key][1]), BinCounts(idx, counts))
+                hist[key] = (merged.bins.astype(np.int64), merged.counts, hist[key][2] + clipped)
+            else:
+                hist[key] = (idx, counts, clipped)
+    return FirstPass(stations, hist)
+
+
+# --------------------------------------------------------------------------------------------------
+# pass 2
+
+
+@dataclass(frozen=True)
+class SecondPlan:
+    """What pass 2 needs from pass 1.
+
+    ``grids``: per station, its first epoch and nominal interval (µs), ``None`` below two
+    epochs; ``slots``: per station, the most grid slots a window holds; ``drop_last``: the
+    ``(station, first epoch)`` of the partitions whose last slot is shared with the next;
+    ``targets``: the bins of each ``(scope, variable)`` percentile (scope: a station, or
+    ``""`` for the network when it holds several), and per percentile its own rank bins with
+    the number of values below them (``below``).
+    """
+
+    grids: dict[str, tuple[int, int] | None]
+    slots: dict[str, int]
+    drop_last: frozenset[tuple[str, int]]
+    targets: dict[tuple[str, str], np.ndarray]
+    below: dict[tuple[str, str, float], tuple[np.ndarray, int]]
+
+
+def _scopes(first: FirstPass) -> dict[str, dict[str, BinCounts]]:
+    scopes = {name: st.bins for name, st in first.stations.items()}
+    if len(scopes) > 1:
+        scopes[""] = {v: merge_counts(*(st.bins[v] for st in first.stations.values())) for v in PERCENTILES}
+    return scopes
+
+
+def plan_second(first: FirstPass, services: Sequence[ServiceLevel]) -> SecondPlan:
+    """The grids and percentile bins of pass 2, from the merged pass 1 of all partitions."""
+    grids, slots, drop = {}, {}, set()
+    windows = [w for ws in continuity_keys(services).values() for w in ws]
+    for name, st in first.stations.items():
+        spans = st.spans
+        between = np.array([b[0] - a[1] for a, b in itertools.pairwise(spans)], dtype=np.int64)
+        extra = step_counts(between)
+        steps = merge_counts(BinCounts(*st.steps), BinCounts(*extra))
+        dt = interval_from_steps(steps.bins.astype(np.int64), steps.counts)
+        grids[name] = None if dt is None else (spans[0][0], dt)
+        if dt is None:
+            continue
+        slots[name] = max((window_slots(w, dt / 1e6) for w in windows), default=1)
+        t0 = spans[0][0]
+        for a, b in itertools.pairwise(spans):
+            if _slot(a[1], t0, dt) == _slot(b[0], t0, dt):
+                drop.add((name, a[0]))
+    targets, below = {}, {}
+    for scope, bins in _scopes(first).items():
+        for var, qs in PERCENTILES.items():
+            if bins[var].n == 0:
+                continue
+            found = []
+            for q in qs:
+                b, n_below = rank_bins(bins[var], q)
+                found.append(b)
+                below[(scope, var, q)] = (b, n_below)
+            targets[(scope, var)] = np.unique(np.concatenate(found))
+    return SecondPlan(grids, slots, frozenset(drop), targets, below)
+
+
+def _slot(t: np.ndarray | int, t0: int, dt: int):
+    """The nearest grid slot (as :func:`~overbound.stats.dependence.slot_grid`)."""
+    return (t - (t0 - dt // 2)) // dt
+
+
+@dataclass
+class Edge:
+    """The grid slots at the two ends of one partition: ``a``/``b`` its first and last slot;
+    ``head``/``tail`` the slots ``[a, a+W)`` and ``(b-W, b]`` (clipped to the partition): whether
+    each holds an epoch (``present``) and whether that epoch is available, per mask key."""
+
+    a: int
+    b: int
+    head_present: np.ndarray
+    tail_present: np.ndarray
+    head_up: dict[tuple, np.ndarray]
+    tail_up: dict[tuple, np.ndarray]
+
+
+@dataclass
+class StationSecond:
+    """Pass-2 partial of one station: off-grid epochs, the windows inside partitions
+    (``[n, n_fail, n_gap]`` per ``(key, window)``), the partitions' :class:`Edge` in time order."""
+
+    n_off_grid: int
+    windows: dict[tuple, np.ndarray]
+    edges: list[Edge]
+
+
+@dataclass
+class SecondPass:
+    """Pass-2 partial of a set of partitions: per station, and the values in the percentile bins."""
+
+    stations: dict[str, StationSecond]
+    values: dict[tuple[str, str], list[np.ndarray]]
+
+
+def second_pass(table: pl.DataFrame, plan: SecondPlan, services: Sequence[ServiceLevel]) -> SecondPass:
+    """Pass 2 on one partition (the same table as its :func:`first_pass`)."""
+    if table.is_empty():
+        return SecondPass({}, {})
+    name = _station_of(table)
+    x = epoch_arrays(table)
+    values = _percentile_values(x)
+    found = {}
+    for scope in (name, ""):
+        for var in PERCENTILES:
+            if (scope, var) in plan.targets:
+                found[(scope, var)] = [values_in_bins(values[var], plan.targets[(scope, var)])]
+    grid = plan.grids[name]
+    if grid is None:
+        return SecondPass({name: StationSecond(0, {}, [])}, found)
+    t0, dt = grid
+    t = x.time_us
+    k = _slot(t, t0, dt)
+    off = int(np.count_nonzero(np.abs(t - k * dt - t0) > dt // 4))
+    keys = continuity_keys(services)
+    masks = {key: availability_mask(x.pls, key) for key in keys}
+    if (name, int(t[0])) in plan.drop_last:  # the next partition sets the shared slot
+        keep = k != k[-1]
+        k = k[keep]
+        masks = {key: m[keep] for key, m in masks.items()}
+    if k.size == 0:
+        return SecondPass({name: StationSecond(off, {}, [])}, found)
+    a, b = int(k[0]), int(k[-1])
+    size = b - a + 1
+    present = np.zeros(size, dtype=bool)
+    present[k - a] = True
+    empty_prefix = prefix_counts(~present)
+    w_max = min(plan.slots[name], size)
+    windows, head_up, tail_up = {}, {}, {}
+    for key, ws in keys.items():
+        up = np.zeros(size, dtype=bool)
+        up[k - a] = masks[key]
+        lost_prefix = prefix_counts(~up)
+        for window in ws:
+            w = window_slots(window, dt / 1e6)
+            m = max(size - w, 0)  # windows starting at 0..m-1 end inside the partition
+            starts = up[:m]
+            fail = lost_prefix[w + 1 : w + 1 + m] != lost_prefix[1 : 1 + m]
+            gap = empty_prefix[w + 1 : w + 1 + m] != empty_prefix[1 : 1 + m]
+            windows[(key, window)] = np.array(
+                [np.count_nonzero(starts), np.count_nonzero(starts & fail), np.count_nonzero(starts & gap)],
+                dtype=np.int64,
+            )
+        head_up[key], tail_up[key] = up[:w_max].copy(), up[size - w_max :].copy()
+    edge = Edge(a, b, present[:w_max].copy(), present[size - w_max :].copy(), head_up, tail_up)
+    return SecondPass({name: StationSecond(off, windows, [edge])}, found)
+
+
+def merge_second(*parts: SecondPass) -> SecondPass:
+    """The pass-2 partial of ``parts`` together, given in table order."""
+    stations: dict[str, StationSecond] = {}
+    values: dict = {}
+    for p in parts:
+        for name, st in p.stations.items():
+            if name in stations:
+                s = stations[name]
+                stations[name] = StationSecond(
+                    s.n_off_grid + st.n_off_grid, _add_dicts(s.windows, st.windows), s.edges + st.edges
+                )
+            else:
+                stations[name] = st
+        for key, arrays in p.values.items():
+            values[key] = values.get(key, []) + arrays
+    return SecondPass(stations, values)
+
+
+# --------------------------------------------------------------------------------------------------
+# finalize
+
+
+def _boundary_windows(edges: list[Edge], key: tuple, w: int) -> tuple[int, int, int, int]:
+    """``(n, n_fail, n_gap, n_truncated)`` of the windows starting in the last ``w`` slots of each
+    partition, from the end slots of it and of the partitions that follow (gaps between: empty)."""
+    b_last = edges[-1].b
+    n = n_fail = n_gap = n_trunc = 0
+    for i, e in enumerate(edges):
+        lo, hi = max(e.a, e.b - w + 1), e.b + w
+        present = np.zeros(hi - lo + 1, dtype=bool)
+        up = np.zeros(hi - lo + 1, dtype=bool)
+        tail_lo = e.b - e.tail_present.size + 1
+        _fill(present, up, lo, hi, tail_lo, e.tail_present, e.tail_up[key])
+        for f in edges[i + 1 :]:
+            if f.a > hi:
+                break
+            _fill(present, up, lo, hi, f.a, f.head_present, f.head_up[key])
+        starts = np.flatnonzero(up[: e.b - lo + 1])  # strip offsets of available start slots
+        counted = starts[starts + lo + w <= b_last]
+        n_trunc += starts.size - counted.size
+        lost, empty = prefix_counts(~up), prefix_counts(~present)
+        n += counted.size
+        n_fail += int(np.count_nonzero(lost[counted + w + 1] != lost[counted + 1]))
+        n_gap += int(np.count_nonzero(empty[counted + w + 1] != empty[counted + 1]))
+    return n, n_fail, n_gap, n_trunc
+
+
+def _fill(present, up, lo: int, hi: int, start: int, src_present, src_up) -> None:
+    """Copy end slots starting at slot ``start`` into the strip ``[lo, hi]`` (later copies win)."""
+    i0, i1 = max(start, lo), min(start + src_present.size - 1, hi)
+    if i1 < i0:
+        return
+    present[i0 - lo : i1 - lo + 1] = src_present[i0 - start : i1 - start + 1]
+    up[i0 - lo : i1 - lo + 1] = src_up[i0 - start : i1 - start + 1]
+
+
+def _station_continuity(second: StationSecond, grid, key: tuple, window_s: float):
+    interval_s = None if grid is None else grid[1] / 1e6
+    if none := no_grid_continuity(interval_s, second.n_off_grid, window_s):
+        return none
+    inside = second.windows.get((key, window_s), np.zeros(3, dtype=np.int64))
+    if not second.edges:
+        return continuity_result(0, 0, 0, 0, window_s, interval_s, second.n_off_grid)
+    bn, bf, bg, bt = _boundary_windows(second.edges, key, window_slots(window_s, interval_s))
+    return continuity_result(
+        int(inside[0]) + bn,
+        int(inside[1]) + bf,
+        int(inside[2]) + bg,
+        bt,
+        window_s,
+        interval_s,
+        second.n_off_grid,
+    )
+
+
+def _percentile(plan: SecondPlan, second: SecondPass, n: int, scope: str, var: str, q: float) -> float:
+    bins, below = plan.below[(scope, var, q)]
+    values = np.concatenate(second.values.get((scope, var), [np.empty(0)]))
+    return exact_percentile(n, q, below, values_in_bins(values, bins))
+
+
+def _result(
+    names: list[str],
+    first: FirstPass,
+    second: SecondPass,
+    plan: SecondPlan,
+    services: Sequence[ServiceLevel],
+    scope: str,
+    histograms: dict,
+    by_station: dict,
+) -> CountingResult:
+    sts = [first.stations[n] for n in names]
+    n_total = sum(s.n_total for s in sts)
+    n_ok = sum(s.n_ok for s in sts)
+    n_available = _sum_dicts(s.n_available for s in sts)
+    regions = _sum_dicts(s.regions for s in sts)
+    counts = {k: StanfordCounts(*(int(c) for c in v)) for k, v in regions.items()}
+    cache: dict = {}
+
+    def continuity(key, window_s):
+        if (key, window_s) not in cache:
+            parts = [_station_continuity(second.stations[n], plan.grids[n], key, window_s) for n in names]
+            cache[(key, window_s)] = sum_continuity(parts, window_s)
+        return cache[(key, window_s)]
+
+    safety = {}
+    for axis in AXES:
+        n_si = sum(s.si_n[axis] for s in sts)
+        var = f"si_{axis}"
+        keys = [f"p{p:g}" for p in SAFETY_PERCENTILES]
+        if n_si == 0:
+            safety[axis] = SafetyIndex(0, None, None, dict.fromkeys(keys))
+            continue
+        best = None
+        for s in sts:
+            best = _later_max(best, s.si_max[axis])
+        pct = {
+            k: _percentile(plan, second, n_si, scope, var, q)
+            for k, q in zip(keys, SAFETY_PERCENTILES, strict=True)
+        }
+        safety[axis] = SafetyIndex(n_si, best[0], _iso(best[1]), pct)
+    starts = [s.spans[0][0] for s in sts]
+    ends = [s.spans[-1][1] for s in sts]
+    return CountingResult(
+        n_total=n_total,
+        n_with_solution=n_ok,
+        stations=tuple(names),
+        start=_iso(min(starts)) if starts else None,
+        end=_iso(max(ends)) if ends else None,
+        hpe95=_percentile(plan, second, n_ok, scope, "hpe", 95.0) if n_ok else None,
+        vpe95=_percentile(plan, second, n_ok, scope, "vpe", 95.0) if n_ok else None,
+        safety=safety,
+        services={s.name: service_kpi(s, n_total, n_available, counts, continuity) for s in services},
+        histograms=histograms,
+        by_station=by_station,
+    )
+
+
+def _sum_dicts(dicts: Iterable[dict]) -> dict:
+    out: dict = {}
+    for d in dicts:
+        out = _add_dicts(out, d)
+    return out
+
+
+def finalize(
+    first: FirstPass,
+    second: SecondPass,
+    plan: SecondPlan,
+    services: Sequence[ServiceLevel],
+    *,
+    histogram_bins: int = 200,
+) -> CountingResult:
+    """The :class:`CountingResult` of all partitions, as :func:`count_kpis` of their pooled table."""
+    names = list(first.stations)
+    hist = {}
+    for key in histogram_keys(services, histogram_bins):
+        idx, counts, clipped = first.histograms[key]
+        dense = np.zeros(histogram_bins * histogram_bins, dtype=np.int64)
+        dense[idx] = counts
+        counts2d = dense.reshape(histogram_bins, histogram_bins)
+        edges = np.linspace(0.0, key[1], histogram_bins + 1)
+        hist[key] = StanfordHistogram(key[0], edges, np.ascontiguousarray(counts2d), int(clipped))
+    if len(names) <= 1:
+        return _result(names, first, second, plan, services, names[0] if names else "", hist, {})
+    by_station = {n: _result([n], first, second, plan, services, n, {}, {}) for n in names}
+    return _result(names, first, second, plan, services, "", hist, by_station)
+
+
+def daily_availability(first: FirstPass, services: Sequence[ServiceLevel]) -> pl.DataFrame:
+    """Epochs and combined availability per station and GPS day: the daily-compliance table.
+
+    Columns ``station``, ``date``, ``n_epochs``, then ``<service>`` (0–1) per service.
+    """
+    combined = [k for k in continuity_keys(services) if k[0] == "combined"]
+    rows = {"station": [], "date": [], "n_epochs": []}
+    cols = {s.name: [] for s in services}
+    for name, st in first.stations.items():
+        for day in sorted(st.days):
+            c = st.days[day]
+            rows["station"].append(name)
+            rows["date"].append(day)
+            rows["n_epochs"].append(int(c[0]))
+            for s in services:
+                cols[s.name].append(int(c[1 + combined.index(("combined", s.hal, s.val))]) / int(c[0]))
+    df = pl.DataFrame(rows, schema={"station": pl.String, "date": pl.Int32, "n_epochs": pl.Int64})
+    df = df.with_columns(pl.col("date").cast(pl.Date))  # days since 1970-01-01 (GPS time scale)
+    return df.with_columns(pl.Series(name, v, dtype=pl.Float64) for name, v in cols.items())
+
+
+def count_partitioned(
+    partitions: Sequence[Callable[[], pl.DataFrame]],
+    services: Sequence[ServiceLevel],
+    *,
+    histogram_bins: int = 200,
+) -> tuple[CountingResult, FirstPass]:
+    """Both passes in this process over ``partitions`` (loaders of one partition table each, in
+    table order: station, then time); the counting result and the merged pass 1."""
+    first = merge_first(*(first_pass(load(), services, histogram_bins=histogram_bins) for load in partitions))
+    plan = plan_second(first, services)
+    second = merge_second(*(second_pass(load(), plan, services) for load in partitions))
+    return finalize(first, second, plan, services, histogram_bins=histogram_bins), first
