@@ -37,6 +37,17 @@ def keep_freed_memory() -> bool:
 
     Elsewhere than Linux/glibc nothing is changed (and False is returned).
     """
+    global _DONE
+    if _DONE is not None:
+        return _DONE
+    _DONE = _apply()
+    return _DONE
+
+
+_DONE: bool | None = None
+
+
+def _apply() -> bool:
     if not sys.platform.startswith("linux"):
         return False
     madvise = getattr(np._core.multiarray, "_set_madvise_hugepage", None)  # numpy >= 1.20

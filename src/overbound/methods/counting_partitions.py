@@ -74,6 +74,7 @@ from overbound.stats.mergeable import (
 
 __all__ = [
     "FirstPass",
+    "PartitionWindows",
     "SecondPass",
     "SecondPlan",
     "count_partitioned",
@@ -84,6 +85,8 @@ __all__ = [
     "merge_second",
     "plan_second",
     "second_pass",
+    "second_values",
+    "second_windows",
 ]
 
 #: The percentile variables and their percentiles.
@@ -102,17 +105,61 @@ _DAY_US = 86_400_000_000
 
 
 @dataclass
+class Edge:
+    """The grid slots at the two ends of one partition: ``a``/``b`` its first and last slot;
+    ``head``/``tail`` the slots ``[a, a+W)`` and ``(b-W, b]`` (clipped to the partition): whether
+    each holds an epoch (``present``) and whether that epoch is available, per mask key."""
+
+    a: int
+    b: int
+    head_present: np.ndarray
+    tail_present: np.ndarray
+    head_up: dict[tuple, np.ndarray]
+    tail_up: dict[tuple, np.ndarray]
+
+    def shifted(self, m: int) -> Edge:
+        """The same slots numbered ``m`` further (another origin of the same grid)."""
+        return Edge(self.a + m, self.b + m, self.head_present, self.tail_present, self.head_up, self.tail_up)
+
+
+@dataclass
+class PartitionWindows:
+    """The continuity windows of one partition: off-grid epochs, the windows that lie inside it
+    (``[n, n_fail, n_gap]`` per ``(key, window)``), and its :class:`Edge` (``None``: no slot)."""
+
+    n_off_grid: int
+    windows: dict[tuple, np.ndarray]
+    edge: Edge | None
+
+
+@dataclass
+class Guess:
+    """A partition's windows counted in pass 1 on the grid of its own first epoch ``t0`` and
+    nominal interval ``dt`` (µs). When the station's grid has the same interval and a phase
+    that differs by whole intervals (regular data), they are the station's windows, the slots
+    renumbered; otherwise pass 2 counts them again."""
+
+    t0: int
+    dt: int
+    windows: PartitionWindows
+
+
+@dataclass
 class StationFirst:
     """Pass-1 partial of one station over one or more of its partitions (in time order).
 
-    ``spans``: first and last epoch (µs) of each partition; ``steps``: value counts of the time
-    steps inside partitions; ``n_available`` and ``regions`` per :func:`continuity_keys` key
-    (regions as the six :class:`StanfordCounts` fields); ``si_max`` per axis ``(value, time)``;
-    ``bins`` per percentile variable; ``days``: per GPS day number, epochs and available epochs
-    per combined key.
+    ``spans``: first and last epoch (µs) of each partition, ``labels`` the caller's names of
+    them (unique), ``guesses`` their continuity windows counted on their own grid
+    (:class:`Guess`); ``steps``: value counts of the time steps inside partitions;
+    ``n_available`` and ``regions`` per :func:`continuity_keys` key (regions as the six
+    :class:`StanfordCounts` fields); ``si_max`` per axis ``(value, time)``; ``bins`` per
+    percentile variable; ``days``: per GPS day number, epochs and available epochs per
+    combined key.
     """
 
     spans: list[tuple[int, int]]
+    labels: list[str]
+    guesses: list[Guess | None]
     steps: tuple[np.ndarray, np.ndarray]
     n_total: int
     n_ok: int
@@ -146,16 +193,20 @@ def _percentile_values(x) -> dict[str, np.ndarray]:
 
 
 def _station_of(table: pl.DataFrame) -> str:
-    names = table["station"].cast(pl.String).unique().to_list()
-    if len(names) != 1:
-        raise ValueError(f"a partition holds one station, got {sorted(names)}")
-    return names[0]
+    """The station of a partition table (one station: checked on the first and last rows, the
+    table being sorted by station)."""
+    st = table["station"]
+    first, last = st[0], st[-1]
+    if first != last:
+        raise ValueError(f"a partition holds one station, got {first!r} and {last!r}")
+    return str(first)
 
 
 def first_pass(
-    table: pl.DataFrame, services: Sequence[ServiceLevel], *, histogram_bins: int = 200
+    table: pl.DataFrame, services: Sequence[ServiceLevel], *, histogram_bins: int = 200, label: str = ""
 ) -> FirstPass:
-    """Pass 1 on one partition: a table of one station, sorted by time (empty: no station)."""
+    """Pass 1 on one partition: a table of one station, sorted by time (empty: no station);
+    ``label`` names the partition in :attr:`StationFirst.labels`."""
     if table.is_empty():
         return FirstPass({}, {})
     x = epoch_arrays(table)
@@ -177,9 +228,14 @@ def first_pass(
         [np.bincount(day - d0)] + [np.bincount(day - d0, weights=masks[k]).astype(np.int64) for k in combined]
     )
     days = {d0 + i: per_day[:, i].astype(np.int64) for i in np.flatnonzero(per_day[0])}
+    steps = step_counts(np.diff(t))
+    dt = interval_from_steps(*steps)
+    guess = None if dt is None else Guess(int(t[0]), dt, _windows(x, int(t[0]), dt, services, False))
     station = StationFirst(
         spans=[(int(t[0]), int(t[-1]))],
-        steps=step_counts(np.diff(t)),
+        labels=[label],
+        guesses=[guess],
+        steps=steps,
         n_total=table.height,
         n_ok=int(np.count_nonzero(x.ok)),
         n_available={k: int(np.count_nonzero(m)) for k, m in masks.items()},
@@ -220,23 +276,6 @@ def _add_dicts(a: dict, b: dict) -> dict:
     return out
 
 
-def _merge_station(a: StationFirst, b: StationFirst) -> StationFirst:
-    """``a`` then ``b`` (``b``'s partitions later in time)."""
-    steps = merge_counts(BinCounts(*a.steps), BinCounts(*b.steps))
-    return StationFirst(
-        spans=a.spans + b.spans,
-        steps=(steps.bins.astype(np.int64), steps.counts),
-        n_total=a.n_total + b.n_total,
-        n_ok=a.n_ok + b.n_ok,
-        n_available=_add_dicts(a.n_available, b.n_available),
-        regions=_add_dicts(a.regions, b.regions),
-        si_n=_add_dicts(a.si_n, b.si_n),
-        si_max={ax: _later_max(a.si_max[ax], b.si_max[ax]) for ax in AXES},
-        bins={v: merge_counts(a.bins[v], b.bins[v]) for v in PERCENTILES},
-        days=_add_dicts(a.days, b.days),
-    )
-
-
 def _later_max(a: tuple[float, int] | None, b: tuple[float, int] | None) -> tuple[float, int] | None:
     """The maximum of ``a`` (earlier in table order) and ``b``; ``a`` on a tie, as ``argmax``."""
     if a is None or (b is not None and b[0] > a[0]):
@@ -246,18 +285,41 @@ def _later_max(a: tuple[float, int] | None, b: tuple[float, int] | None) -> tupl
 
 def merge_first(*parts: FirstPass) -> FirstPass:
     """The pass-1 partial of ``parts`` together, given in table order (station, then time)."""
-    stations: dict[str, StationFirst] = {}
-    hist: dict = {}
+    by_station: dict[str, list[StationFirst]] = {}
     for p in parts:
         for name, st in p.stations.items():
-            stations[name] = _merge_station(stations[name], st) if name in stations else st
-        for key, (idx, counts, clipped) in p.histograms.items():
-            if key in hist:
-                merged = merge_counts(BinCounts(hist[key][0], hist[key][1]), BinCounts(idx, counts))
-                hist[key] = (merged.bins.astype(np.int64), merged.counts, hist[key][2] + clipped)
-            else:
-                hist[key] = (idx, counts, clipped)
+            by_station.setdefault(name, []).append(st)
+    stations = {name: _merge_stations(sts) for name, sts in by_station.items()}
+    hist: dict = {}
+    for key in dict.fromkeys(k for p in parts for k in p.histograms):
+        hs = [p.histograms[key] for p in parts if key in p.histograms]
+        merged = merge_counts(*(BinCounts(idx, counts) for idx, counts, _ in hs))
+        hist[key] = (merged.bins.astype(np.int64), merged.counts, sum(h[2] for h in hs))
     return FirstPass(stations, hist)
+
+
+def _merge_stations(sts: list[StationFirst]) -> StationFirst:
+    """One station's partials in time order, merged at once (one aggregation per count table)."""
+    if len(sts) == 1:
+        return sts[0]
+    steps = merge_counts(*(BinCounts(*s.steps) for s in sts))
+    best: dict[str, tuple[float, int] | None] = dict.fromkeys(AXES)
+    for s in sts:
+        best = {ax: _later_max(best[ax], s.si_max[ax]) for ax in AXES}
+    return StationFirst(
+        spans=[x for s in sts for x in s.spans],
+        labels=[x for s in sts for x in s.labels],
+        guesses=[x for s in sts for x in s.guesses],
+        steps=(steps.bins.astype(np.int64), steps.counts),
+        n_total=sum(s.n_total for s in sts),
+        n_ok=sum(s.n_ok for s in sts),
+        n_available=_sum_dicts(s.n_available for s in sts),
+        regions=_sum_dicts(s.regions for s in sts),
+        si_n=_sum_dicts(s.si_n for s in sts),
+        si_max=best,
+        bins={v: merge_counts(*(s.bins[v] for s in sts)) for v in PERCENTILES},
+        days=_sum_dicts(s.days for s in sts),
+    )
 
 
 # --------------------------------------------------------------------------------------------------
@@ -270,15 +332,17 @@ class SecondPlan:
 
     ``grids``: per station, its first epoch and nominal interval (µs), ``None`` below two
     epochs; ``slots``: per station, the most grid slots a window holds; ``drop_last``: the
-    ``(station, first epoch)`` of the partitions whose last slot is shared with the next;
-    ``targets``: the bins of each ``(scope, variable)`` percentile (scope: a station, or
-    ``""`` for the network when it holds several), and per percentile its own rank bins with
-    the number of values below them (``below``).
+    labels of the partitions whose last slot is shared with the next; ``redo``: the labels of
+    the partitions whose windows pass 2 counts (their pass-1 guess does not hold);
+    ``targets``: the bins of each ``(scope, variable)`` percentile collected in pass 2 (scope: a
+    station, or ``""`` for the network when it holds several), and ``below`` per percentile its
+    own rank bins with the number of values below them.
     """
 
     grids: dict[str, tuple[int, int] | None]
     slots: dict[str, int]
-    drop_last: frozenset[tuple[str, int]]
+    drop_last: frozenset[str]
+    redo: frozenset[str]
     targets: dict[tuple[str, str], np.ndarray]
     below: dict[tuple[str, str, float], tuple[np.ndarray, int]]
 
@@ -290,24 +354,30 @@ def _scopes(first: FirstPass) -> dict[str, dict[str, BinCounts]]:
     return scopes
 
 
+def _max_slots(services: Sequence[ServiceLevel], dt: int) -> int:
+    windows = [w for ws in continuity_keys(services).values() for w in ws]
+    return max((window_slots(w, dt / 1e6) for w in windows), default=1)
+
+
 def plan_second(first: FirstPass, services: Sequence[ServiceLevel]) -> SecondPlan:
     """The grids and percentile bins of pass 2, from the merged pass 1 of all partitions."""
-    grids, slots, drop = {}, {}, set()
-    windows = [w for ws in continuity_keys(services).values() for w in ws]
+    grids, slots, drop, redo = {}, {}, set(), set()
     for name, st in first.stations.items():
         spans = st.spans
         between = np.array([b[0] - a[1] for a, b in itertools.pairwise(spans)], dtype=np.int64)
-        extra = step_counts(between)
-        steps = merge_counts(BinCounts(*st.steps), BinCounts(*extra))
+        steps = merge_counts(BinCounts(*st.steps), BinCounts(*step_counts(between)))
         dt = interval_from_steps(steps.bins.astype(np.int64), steps.counts)
-        grids[name] = None if dt is None else (spans[0][0], dt)
+        t0 = spans[0][0]
+        grids[name] = None if dt is None else (t0, dt)
         if dt is None:
             continue
-        slots[name] = max((window_slots(w, dt / 1e6) for w in windows), default=1)
-        t0 = spans[0][0]
-        for a, b in itertools.pairwise(spans):
+        slots[name] = _max_slots(services, dt)
+        for (a, b), label in zip(itertools.pairwise(spans), st.labels, strict=False):
             if _slot(a[1], t0, dt) == _slot(b[0], t0, dt):
-                drop.add((name, a[0]))
+                drop.add(label)
+        for label, g in zip(st.labels, st.guesses, strict=True):
+            if label in drop or g is None or g.dt != dt or (g.t0 - t0) % dt:
+                redo.add(label)
     targets, below = {}, {}
     for scope, bins in _scopes(first).items():
         for var, qs in PERCENTILES.items():
@@ -318,8 +388,29 @@ def plan_second(first: FirstPass, services: Sequence[ServiceLevel]) -> SecondPla
                 b, n_below = rank_bins(bins[var], q)
                 found.append(b)
                 below[(scope, var, q)] = (b, n_below)
-            targets[(scope, var)] = np.unique(np.concatenate(found))
-    return SecondPlan(grids, slots, frozenset(drop), targets, below)
+            targets[(scope, var)] = _widened(bins[var].bins, np.concatenate(found))
+    return SecondPlan(grids, slots, frozenset(drop), frozenset(redo), targets, below)
+
+
+#: Neighbouring bins (of those holding values) that pass 2 also collects on each side of a rank
+#: bin: a re-analysis after a day was added finds its rank bins among them and can reuse it.
+MARGIN_BINS = 4
+
+
+def _widened(present: np.ndarray, rank: np.ndarray) -> np.ndarray:
+    """``rank`` bins and :data:`MARGIN_BINS` of the ``present`` bins on each side of them."""
+    i = np.searchsorted(present, rank)
+    near = (i[:, None] + np.arange(-MARGIN_BINS, MARGIN_BINS + 1)).ravel()
+    return np.unique(present[np.clip(near, 0, present.size - 1)])
+
+
+def covers(collected: dict, plan: SecondPlan, scopes: Iterable[str]) -> bool:
+    """Whether values ``collected`` by :func:`second_values` (against an earlier plan: their
+    bins per ``(scope, variable)``) hold every value ``plan`` needs for ``scopes``."""
+    for (scope, var, _q), (rank, _below) in plan.below.items():
+        if scope in scopes and not np.isin(rank, collected.get((scope, var), np.empty(0, np.uint64))).all():
+            return False
+    return True
 
 
 def _slot(t: np.ndarray | int, t0: int, dt: int):
@@ -328,70 +419,73 @@ def _slot(t: np.ndarray | int, t0: int, dt: int):
 
 
 @dataclass
-class Edge:
-    """The grid slots at the two ends of one partition: ``a``/``b`` its first and last slot;
-    ``head``/``tail`` the slots ``[a, a+W)`` and ``(b-W, b]`` (clipped to the partition): whether
-    each holds an epoch (``present``) and whether that epoch is available, per mask key."""
-
-    a: int
-    b: int
-    head_present: np.ndarray
-    tail_present: np.ndarray
-    head_up: dict[tuple, np.ndarray]
-    tail_up: dict[tuple, np.ndarray]
-
-
-@dataclass
-class StationSecond:
-    """Pass-2 partial of one station: off-grid epochs, the windows inside partitions
-    (``[n, n_fail, n_gap]`` per ``(key, window)``), the partitions' :class:`Edge` in time order."""
-
-    n_off_grid: int
-    windows: dict[tuple, np.ndarray]
-    edges: list[Edge]
-
-
-@dataclass
 class SecondPass:
-    """Pass-2 partial of a set of partitions: per station, and the values in the percentile bins."""
+    """Pass-2 partial of a set of partitions: the windows of the partitions of ``plan.redo``
+    by label, and the values in the percentile bins."""
 
-    stations: dict[str, StationSecond]
+    windows: dict[str, PartitionWindows]
     values: dict[tuple[str, str], list[np.ndarray]]
 
 
-def second_pass(table: pl.DataFrame, plan: SecondPlan, services: Sequence[ServiceLevel]) -> SecondPass:
-    """Pass 2 on one partition (the same table as its :func:`first_pass`)."""
+def second_pass(
+    table: pl.DataFrame, plan: SecondPlan, services: Sequence[ServiceLevel], *, label: str = ""
+) -> SecondPass:
+    """Pass 2 on one partition (the same table and label as its :func:`first_pass`): its values
+    (:func:`second_values`), and its windows when its label is in ``plan.redo``."""
     if table.is_empty():
         return SecondPass({}, {})
+    windows = {label: second_windows(table, plan, services, label=label)} if label in plan.redo else {}
+    return SecondPass(windows, second_values(table, plan))
+
+
+def second_values(table: pl.DataFrame, plan: SecondPlan) -> dict[tuple[str, str], list[np.ndarray]]:
+    """The partition's values in the percentile target bins of its station and of the network."""
     name = _station_of(table)
-    x = epoch_arrays(table)
-    values = _percentile_values(x)
-    found = {}
-    for scope in (name, ""):
-        for var in PERCENTILES:
-            if (scope, var) in plan.targets:
-                found[(scope, var)] = [values_in_bins(values[var], plan.targets[(scope, var)])]
-    grid = plan.grids[name]
+    values = _percentile_values(epoch_arrays(table))
+    return {
+        (scope, var): [values_in_bins(values[var], plan.targets[(scope, var)])]
+        for scope in (name, "")
+        for var in PERCENTILES
+        if (scope, var) in plan.targets
+    }
+
+
+def windows_plan(plan: SecondPlan, station: str, label: str) -> tuple:
+    """What :func:`second_windows` of a partition reads from the plan (its cache key): the
+    station's grid and window slots, and whether it leaves its last slot to the next partition."""
+    return (plan.grids.get(station), plan.slots.get(station), label in plan.drop_last)
+
+
+def second_windows(
+    table: pl.DataFrame, plan: SecondPlan, services: Sequence[ServiceLevel], *, label: str = ""
+) -> PartitionWindows:
+    """The windows of one partition on its station's grid."""
+    grid = plan.grids[_station_of(table)]
     if grid is None:
-        return SecondPass({name: StationSecond(0, {}, [])}, found)
-    t0, dt = grid
+        return PartitionWindows(0, {}, None)
+    return _windows(epoch_arrays(table), *grid, services, label in plan.drop_last)
+
+
+def _windows(x, t0: int, dt: int, services: Sequence[ServiceLevel], drop_last: bool) -> PartitionWindows:
+    """Windows inside the partition and its end slots, on the grid ``(t0, dt)``; with
+    ``drop_last`` its last slot is left to the next partition."""
     t = x.time_us
     k = _slot(t, t0, dt)
     off = int(np.count_nonzero(np.abs(t - k * dt - t0) > dt // 4))
     keys = continuity_keys(services)
     masks = {key: availability_mask(x.pls, key) for key in keys}
-    if (name, int(t[0])) in plan.drop_last:  # the next partition sets the shared slot
+    if drop_last:  # the next partition sets the shared slot
         keep = k != k[-1]
         k = k[keep]
         masks = {key: m[keep] for key, m in masks.items()}
     if k.size == 0:
-        return SecondPass({name: StationSecond(off, {}, [])}, found)
+        return PartitionWindows(off, {}, None)
     a, b = int(k[0]), int(k[-1])
     size = b - a + 1
     present = np.zeros(size, dtype=bool)
     present[k - a] = True
     empty_prefix = prefix_counts(~present)
-    w_max = min(plan.slots[name], size)
+    w_max = min(_max_slots(services, dt), size)
     windows, head_up, tail_up = {}, {}, {}
     for key, ws in keys.items():
         up = np.zeros(size, dtype=bool)
@@ -409,25 +503,18 @@ def second_pass(table: pl.DataFrame, plan: SecondPlan, services: Sequence[Servic
             )
         head_up[key], tail_up[key] = up[:w_max].copy(), up[size - w_max :].copy()
     edge = Edge(a, b, present[:w_max].copy(), present[size - w_max :].copy(), head_up, tail_up)
-    return SecondPass({name: StationSecond(off, windows, [edge])}, found)
+    return PartitionWindows(off, windows, edge)
 
 
 def merge_second(*parts: SecondPass) -> SecondPass:
     """The pass-2 partial of ``parts`` together, given in table order."""
-    stations: dict[str, StationSecond] = {}
+    windows: dict = {}
     values: dict = {}
     for p in parts:
-        for name, st in p.stations.items():
-            if name in stations:
-                s = stations[name]
-                stations[name] = StationSecond(
-                    s.n_off_grid + st.n_off_grid, _add_dicts(s.windows, st.windows), s.edges + st.edges
-                )
-            else:
-                stations[name] = st
+        windows.update(p.windows)
         for key, arrays in p.values.items():
             values[key] = values.get(key, []) + arrays
-    return SecondPass(stations, values)
+    return SecondPass(windows, values)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -468,23 +555,42 @@ def _fill(present, up, lo: int, hi: int, start: int, src_present, src_up) -> Non
     up[i0 - lo : i1 - lo + 1] = src_up[i0 - start : i1 - start + 1]
 
 
-def _station_continuity(second: StationSecond, grid, key: tuple, window_s: float):
-    interval_s = None if grid is None else grid[1] / 1e6
-    if none := no_grid_continuity(interval_s, second.n_off_grid, window_s):
-        return none
-    inside = second.windows.get((key, window_s), np.zeros(3, dtype=np.int64))
-    if not second.edges:
-        return continuity_result(0, 0, 0, 0, window_s, interval_s, second.n_off_grid)
-    bn, bf, bg, bt = _boundary_windows(second.edges, key, window_slots(window_s, interval_s))
-    return continuity_result(
-        int(inside[0]) + bn,
-        int(inside[1]) + bf,
-        int(inside[2]) + bg,
-        bt,
-        window_s,
-        interval_s,
-        second.n_off_grid,
+@dataclass
+class _StationWindows:
+    n_off_grid: int
+    windows: dict[tuple, np.ndarray]
+    edges: list[Edge]
+
+
+def _station_windows(st: StationFirst, second: SecondPass, plan: SecondPlan, name: str) -> _StationWindows:
+    """A station's partition windows in time order: pass 2's where it counted them, else the
+    pass-1 guess with its slots renumbered onto the station's grid."""
+    grid = plan.grids[name]
+    parts = []
+    for label, g in zip(st.labels, st.guesses, strict=True):
+        if label in second.windows:
+            parts.append(second.windows[label])
+        elif grid is not None and g is not None:
+            m = (g.t0 - grid[0]) // grid[1]
+            w = g.windows
+            parts.append(PartitionWindows(w.n_off_grid, w.windows, w.edge.shifted(m) if w.edge else None))
+    return _StationWindows(
+        sum(p.n_off_grid for p in parts),
+        _sum_dicts(p.windows for p in parts),
+        [p.edge for p in parts if p.edge is not None],
     )
+
+
+def _station_continuity(sw: _StationWindows, grid, key: tuple, window_s: float):
+    interval_s = None if grid is None else grid[1] / 1e6
+    if none := no_grid_continuity(interval_s, sw.n_off_grid, window_s):
+        return none
+    if not sw.edges:
+        return continuity_result(0, 0, 0, 0, window_s, interval_s, sw.n_off_grid)
+    inside = sw.windows.get((key, window_s), np.zeros(3, dtype=np.int64))
+    bn, bf, bg, bt = _boundary_windows(sw.edges, key, window_slots(window_s, interval_s))
+    n, n_fail, n_gap = (int(v) for v in inside)
+    return continuity_result(n + bn, n_fail + bf, n_gap + bg, bt, window_s, interval_s, sw.n_off_grid)
 
 
 def _percentile(plan: SecondPlan, second: SecondPass, n: int, scope: str, var: str, q: float) -> float:
@@ -510,10 +616,11 @@ def _result(
     regions = _sum_dicts(s.regions for s in sts)
     counts = {k: StanfordCounts(*(int(c) for c in v)) for k, v in regions.items()}
     cache: dict = {}
+    station_windows = {n: _station_windows(first.stations[n], second, plan, n) for n in names}
 
     def continuity(key, window_s):
         if (key, window_s) not in cache:
-            parts = [_station_continuity(second.stations[n], plan.grids[n], key, window_s) for n in names]
+            parts = [_station_continuity(station_windows[n], plan.grids[n], key, window_s) for n in names]
             cache[(key, window_s)] = sum_continuity(parts, window_s)
         return cache[(key, window_s)]
 
@@ -610,7 +717,14 @@ def count_partitioned(
 ) -> tuple[CountingResult, FirstPass]:
     """Both passes in this process over ``partitions`` (loaders of one partition table each, in
     table order: station, then time); the counting result and the merged pass 1."""
-    first = merge_first(*(first_pass(load(), services, histogram_bins=histogram_bins) for load in partitions))
+    first = merge_first(
+        *(
+            first_pass(load(), services, histogram_bins=histogram_bins, label=str(i))
+            for i, load in enumerate(partitions)
+        )
+    )
     plan = plan_second(first, services)
-    second = merge_second(*(second_pass(load(), plan, services) for load in partitions))
+    second = merge_second(
+        *(second_pass(load(), plan, services, label=str(i)) for i, load in enumerate(partitions))
+    )
     return finalize(first, second, plan, services, histogram_bins=histogram_bins), first
