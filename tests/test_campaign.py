@@ -1,0 +1,144 @@
+"""The campaign analysis by partition (issue 14): the same counting KPIs as the pooled table, in
+this process, on a local cluster and on a real ``dask scheduler`` with two ``dask worker``
+processes; a cache that is reused and invalidated; unreadable partitions counted, not fatal."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from overbound.campaign import campaign_client, count_campaign
+from overbound.io.dataset import partitions, read_dataset
+from overbound.methods.counting import count_kpis
+from overbound.services import resolve_services
+from overbound.simulate import SimulationConfig, write_simulation_dataset
+
+sys.path.insert(0, str(Path(__file__).parent / "methods"))
+from test_counting_partitions import assert_same
+
+SERVICES = resolve_services(None)
+
+
+@pytest.fixture(scope="module")
+def dataset(tmp_path_factory) -> Path:
+    """3 stations x 7 days at 5 s, with gaps (some across midnight)."""
+    path = tmp_path_factory.mktemp("campaign") / "ds"
+    cfg = SimulationConfig(days=7, interval_s=5.0, stations=3, seed=5, gap_rate_per_day=3.0, gap_mean_s=600)
+    write_simulation_dataset(cfg, path)
+    return path
+
+
+@pytest.fixture(scope="module")
+def pooled(dataset: Path):
+    table, _ = read_dataset(dataset, columns=("alert",))
+    return count_kpis(table, SERVICES)
+
+
+def _copy(dataset: Path, tmp_path: Path) -> Path:
+    out = tmp_path / "ds"
+    shutil.copytree(dataset, out, ignore=shutil.ignore_patterns(".overbound"))
+    return out
+
+
+def test_in_process_equals_pooled_table(dataset: Path, pooled, tmp_path: Path) -> None:
+    ds = _copy(dataset, tmp_path)
+    result = count_campaign(ds, SERVICES)
+    assert_same(result.counting, pooled)
+    assert result.failures == () and result.n_partitions == 21
+    assert result.daily.height == 21 and result.daily["n_epochs"].sum() == pooled.n_total
+
+
+def test_cache_is_reused_then_invalidated(dataset: Path, pooled, tmp_path: Path) -> None:
+    ds = _copy(dataset, tmp_path)
+    first = count_campaign(ds, SERVICES)
+    assert first.n_cached == 0 and first.n_computed > 0
+    again = count_campaign(ds, SERVICES)
+    assert again.n_computed == 0 and again.n_cached == first.n_computed
+    assert_same(again.counting, pooled)
+    # a replaced partition (new file, as ingest writes it) is computed again, alone in pass 1
+    part = partitions(ds)[4].path
+    data = part.read_bytes()
+    part.unlink()
+    part.write_bytes(data)
+    os.utime(part, ns=(time.time_ns(), time.time_ns() + 10**9))
+    third = count_campaign(ds, SERVICES)
+    assert 1 <= third.n_computed <= 3, third.n_computed  # pass 1, maybe values and windows
+    assert_same(third.counting, pooled)
+    # a stale cache entry of another overbound version is never used
+    for cache in ds.rglob(".overbound/pass1.pkl"):
+        cache.write_bytes(b"not a pickle")
+    assert_same(count_campaign(ds, SERVICES).counting, pooled)
+
+
+def test_unreadable_partition_is_reported_and_the_rest_goes_on(dataset: Path, tmp_path: Path) -> None:
+    ds = _copy(dataset, tmp_path)
+    bad = partitions(ds)[8]
+    bad.path.write_bytes(b"PAR1 this is not parquet")
+    result = count_campaign(ds, SERVICES, cache=False)
+    (failure,) = result.failures
+    assert (failure.station, failure.date) == (bad.station, bad.date.isoformat()) and failure.reason
+    bad.path.unlink()
+    shutil.rmtree(bad.path.parent)
+    table, _ = read_dataset(ds, columns=("alert",))
+    assert_same(result.counting, count_kpis(table, SERVICES))
+
+
+def test_local_cluster_equals_pooled_table(dataset: Path, pooled, tmp_path: Path) -> None:
+    with campaign_client(workers=2) as client:
+        result = count_campaign(_copy(dataset, tmp_path), SERVICES, client=client)
+    assert_same(result.counting, pooled)
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _dask_command() -> list[str]:
+    """The ``dask`` command of this environment (its script beside this Python, else on PATH)."""
+    beside = Path(sys.executable).parent / "dask"
+    found = str(beside) if beside.exists() else shutil.which("dask")
+    assert found, "the dask command is installed with dask[distributed]"
+    return [found]
+
+
+@pytest.fixture
+def scheduler():
+    """A real ``dask scheduler`` and two ``dask worker`` processes on localhost."""
+    port = _free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    dask = _dask_command()
+    quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
+    scheduler_args = ["scheduler", "--host", "127.0.0.1", "--port", str(port), "--dashboard-address", ":0"]
+    procs = [subprocess.Popen([*dask, *scheduler_args], **quiet)]
+    try:
+        for _ in range(2):
+            worker_args = ["worker", address, "--nthreads", "1", "--nworkers", "1", "--no-dashboard"]
+            procs.append(subprocess.Popen([*dask, *worker_args], **quiet))
+        yield address
+    finally:
+        for p in reversed(procs):
+            p.terminate()
+        for p in procs:
+            p.wait(timeout=30)
+
+
+def test_real_scheduler_and_two_workers(dataset: Path, pooled, tmp_path: Path, scheduler: str) -> None:
+    client = campaign_client(scheduler=scheduler)
+    try:
+        client.wait_for_workers(2, timeout=60)
+        assert len(client.scheduler_info()["workers"]) == 2
+        result = count_campaign(_copy(dataset, tmp_path), SERVICES, client=client)
+        ran_on = client.run(os.getpid)
+    finally:
+        client.close()
+    assert len(set(ran_on.values())) == 2
+    assert_same(result.counting, pooled)
