@@ -4,6 +4,7 @@ processes; a cache that is reused and invalidated; unreadable partitions counted
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import socket
@@ -28,9 +29,9 @@ SERVICES = resolve_services(None)
 
 @pytest.fixture(scope="module")
 def dataset(tmp_path_factory) -> Path:
-    """3 stations x 7 days at 5 s, with gaps (some across midnight)."""
+    """3 stations x 7 days at 10 s, with gaps (some across midnight)."""
     path = tmp_path_factory.mktemp("campaign") / "ds"
-    cfg = SimulationConfig(days=7, interval_s=5.0, stations=3, seed=5, gap_rate_per_day=3.0, gap_mean_s=600)
+    cfg = SimulationConfig(days=7, interval_s=10.0, stations=3, seed=5, gap_rate_per_day=3.0, gap_mean_s=600)
     write_simulation_dataset(cfg, path)
     return path
 
@@ -121,12 +122,12 @@ def scheduler():
     procs = [subprocess.Popen([*dask, *scheduler_args], **quiet)]
     try:
         for _ in range(2):
-            worker_args = ["worker", address, "--nthreads", "1", "--nworkers", "1", "--no-dashboard"]
+            worker_args = ["worker", address, "--nthreads", "1", "--no-nanny", "--no-dashboard"]
             procs.append(subprocess.Popen([*dask, *worker_args], **quiet))
         yield address
     finally:
-        for p in reversed(procs):
-            p.terminate()
+        for p in reversed(procs):  # no nanny: killing a worker leaves no child behind
+            p.kill()
         for p in procs:
             p.wait(timeout=30)
 
@@ -142,3 +143,57 @@ def test_real_scheduler_and_two_workers(dataset: Path, pooled, tmp_path: Path, s
         client.close()
     assert len(set(ran_on.values())) == 2
     assert_same(result.counting, pooled)
+
+
+# --------------------------------------------------------------------------------------------------
+# the command line: the issue's acceptance tests
+
+
+def _analyze(args: list[str]) -> dict:
+    from click.testing import CliRunner
+
+    from overbound.cli import main
+
+    res = CliRunner().invoke(main, ["analyze", *args])
+    assert res.exit_code == 0, res.output
+    out = Path(args[args.index("-o") + 1])
+    return json.loads((out / "summary.json").read_text())
+
+
+def _numbers(doc: dict) -> dict:
+    """The summary without what names the input (title, inputs, provenance) or the run's options."""
+    return {k: v for k, v in doc.items() if k not in ("title", "inputs", "provenance")}
+
+
+def test_dataset_and_one_file_give_the_same_summary(dataset: Path, tmp_path: Path) -> None:
+    """3 stations x 7 days: every number of summary.json, the verdicts and the methods included,
+    equal for the dataset analysed by partition and for the same epochs as one file."""
+    from overbound.io.table import write_epochs
+
+    table, _ = read_dataset(dataset)
+    one = tmp_path / "network.parquet"
+    write_epochs(table, one)
+    ds = _copy(dataset, tmp_path)
+    common = ["--no-evt", "--no-parametric"]  # the methods read the same pooled table; kept short
+    file_doc = _analyze([str(one), "-o", str(tmp_path / "file"), *common])
+    ds_doc = _analyze([str(ds), "-o", str(tmp_path / "dataset"), "--workers", "0", *common])
+    network = ds_doc.pop("network")
+    assert _numbers(file_doc) == _numbers(ds_doc)
+    assert file_doc["services"]["LPV"]["continuity"]["combined"]["n_windows"] > 0
+    assert network["partitions"] == network["partitions_analysed"] == 21 and network["unreadable"] == []
+    assert sum(len(days) for days in network["days"].values()) == 21
+    assert ds_doc["verdicts"] and set(ds_doc["stations"]) == {"SIM01", "SIM02", "SIM03"}
+
+
+def test_counting_only_on_a_real_scheduler_equals_in_process(
+    dataset: Path, tmp_path: Path, scheduler
+) -> None:
+    ds = _copy(dataset, tmp_path)
+    local = _analyze(
+        [str(ds), "-o", str(tmp_path / "local"), "--counting-only", "--workers", "0", "--no-cache"]
+    )
+    remote = _analyze([str(ds), "-o", str(tmp_path / "remote"), "--counting-only", "--scheduler", scheduler])
+    assert _numbers(local) == _numbers(remote)
+    assert local["verdicts"] == {} and local["network"]["partitions_analysed"] == 21
+    html = (tmp_path / "remote" / "report.html").read_text()
+    assert 'id="network"' in html and 'data-figure="heatmap-LPV"' in html and "Not assessed" in html

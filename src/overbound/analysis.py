@@ -12,6 +12,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 import polars as pl
 
+from overbound.campaign import CampaignCounting, count_campaign
+from overbound.io.dataset import is_dataset, read_dataset, read_manifest
 from overbound.io.geodesy import Reference
 from overbound.io.open import Source, read, source_name
 from overbound.io.schema import InputError, ReadReport, validate_epochs
@@ -50,7 +52,11 @@ class Analysis:
         report and JSON say which stage failed and why.
     evidence : the counted evidence of the verdicts (:func:`~overbound.methods.evidence.counted_evidence`):
         counts with exact bounds that account for the dependence between epochs, and the
-        safety-index tail counts the models are checked against.
+        safety-index tail counts the models are checked against. ``None`` for a counting-only
+        campaign analysis (no verdicts then).
+    network : for a campaign dataset, its analysis by partition
+        (:class:`~overbound.campaign.CampaignCounting`: per-day availability, partitions that
+        could not be read, cache use); ``counting`` is then its merged result.
     """
 
     table: pl.DataFrame
@@ -64,6 +70,7 @@ class Analysis:
     parametric: ParametricAnalysis | None = None
     evidence: Evidence | None = None
     method_failures: tuple[tuple[str, str, str], ...] = ()
+    network: CampaignCounting | None = None
 
     @property
     def n_rejected(self) -> int:
@@ -136,6 +143,9 @@ def analyze(
     evt_seed: int = 0,
     parametric: bool = False,
     progress: Callable[[str], None] | None = None,
+    client=None,
+    counting_only: bool = False,
+    cache: bool = True,
 ) -> Analysis:
     """Read ``inputs`` (or take an epoch table) and count the KPIs for each service.
 
@@ -160,7 +170,37 @@ def analyze(
     (:func:`~overbound.methods.parametric.parametric_analysis` with its defaults: decorrelation times
     from the ACF, 95 % bounds, ``services``) on both axes; an axis it cannot analyse carries its
     reason in ``Analysis.parametric.reasons``.
+
+    A campaign dataset (one input, a directory of :mod:`overbound.io.dataset`) is counted
+    partition by partition (:func:`~overbound.campaign.count_campaign` on ``client``, a
+    ``distributed.Client``, or in this process when ``None``; partials cached unless
+    ``cache=False``): the same counting as of its pooled table, in memory bounded by a partition.
+    The methods and the verdicts' evidence still read the pooled table; with ``counting_only`` they
+    are not run and the table is not read (no verdicts: ``evidence`` is ``None``).
     """
+    if _is_campaign(inputs, format):
+        return _analyze_campaign(
+            Path(inputs[0]),
+            services=services,
+            title=title,
+            client=client,
+            cache=cache,
+            counting_only=counting_only,
+            progress=progress,
+            table_options={
+                "reference": reference,
+                "station": station,
+                "strict": strict,
+                "mapping": mapping,
+                "columns": columns,
+                "time_range": time_range,
+                "confidence": confidence,
+                "evt": evt,
+                "evt_n_boot": evt_n_boot,
+                "evt_seed": evt_seed,
+                "parametric": parametric,
+            },
+        )
     if isinstance(inputs, pl.DataFrame):
         table, reports = validate_epochs(inputs), ()
         label = title or "epoch table"
@@ -180,7 +220,36 @@ def analyze(
     levels = _levels(services)
     if progress:
         progress("counting KPIs")
-    counting = count_kpis(table, levels)
+    return _with_methods(
+        table,
+        reports,
+        levels,
+        count_kpis(table, levels),
+        label,
+        confidence,
+        evt,
+        evt_n_boot,
+        evt_seed,
+        parametric,
+        progress,
+    )
+
+
+def _with_methods(
+    table,
+    reports,
+    levels,
+    counting,
+    label,
+    confidence,
+    evt,
+    evt_n_boot,
+    evt_seed,
+    parametric,
+    progress,
+    network=None,
+) -> Analysis:
+    """The analysis of ``table`` with its ``counting`` done: the evidence and the methods asked."""
     evidence = counted_evidence(table, counting, levels)
     axes = _confidence_axes(table) if confidence is None else tuple(confidence)
     if axes and progress:
@@ -198,7 +267,84 @@ def analyze(
         if progress:
             progress("parametric analysis")
         par = _guarded(failures, "parametric", "both", parametric_analysis, table, services=levels)
-    return Analysis(table, reports, levels, counting, label, cl, done, failed, par, evidence, tuple(failures))
+    return Analysis(
+        table, reports, levels, counting, label, cl, done, failed, par, evidence, tuple(failures), network
+    )
+
+
+def _is_campaign(inputs, format: str | None) -> bool:
+    return (
+        not isinstance(inputs, pl.DataFrame)
+        and len(inputs) == 1
+        and format in (None, "dataset")
+        and isinstance(inputs[0], str | Path)
+        and is_dataset(inputs[0])
+    )
+
+
+def _analyze_campaign(
+    dataset: Path, *, services, title, client, cache, counting_only, progress, table_options
+) -> Analysis:
+    """:func:`analyze` of a campaign dataset (see there)."""
+    opts = dict(table_options)
+    if any(opts[k] is not None for k in ("reference", "station", "mapping")) or opts["strict"]:
+        raise InputError(
+            str(dataset),
+            "a dataset is read as ingested: give --reference, --station, --column and --strict to "
+            "'overbound ingest' instead",
+        )
+    window = opts["time_range"]
+    levels = _levels(services)
+
+    def tick(stage: str, done: int, total: int) -> None:
+        if progress:
+            progress(f"counting KPIs, {stage}: {done}/{total} station-days")
+
+    network = count_campaign(dataset, levels, client=client, cache=cache, time_range=window, progress=tick)
+    report = _campaign_report(dataset, network)
+    label = title or dataset.name
+    if counting_only:
+        return Analysis(pl.DataFrame(), (report,), levels, network.counting, label, network=network)
+    skip = {f"station={f.station}/date={f.date}" for f in network.failures}
+    table, _ = read_dataset(dataset, columns=opts["columns"], skip=skip)
+    if window is not None:
+        start, end = window
+        table = table.filter(
+            pl.col("time") >= start if start else True, pl.col("time") < end if end else True
+        )
+    table = validate_epochs(table, str(dataset))
+    return _with_methods(
+        table,
+        (report,),
+        levels,
+        network.counting,
+        label,
+        opts["confidence"],
+        opts["evt"],
+        opts["evt_n_boot"],
+        opts["evt_seed"],
+        opts["parametric"],
+        progress,
+        network,
+    )
+
+
+def _campaign_report(dataset: Path, network: CampaignCounting) -> ReadReport:
+    """The read report of a dataset: its epochs, and the partitions that could not be read."""
+    n_stations = len(read_manifest(dataset).get("stations", {})) or len(network.counting.stations)
+    n = network.counting.n_total
+    failed = [f"{f.station} {f.date}: {f.reason}" for f in network.failures]
+    return ReadReport(
+        source=str(dataset),
+        format="dataset",
+        rows_read=n,
+        rows_kept=n,
+        notes=(
+            f"{network.n_partitions} station-days of {n_stations} stations, "
+            f"{len(network.failures)} unreadable (left out)"
+            + (": " + "; ".join(failed[:20]) if failed else ""),
+        ),
+    )
 
 
 #: What a numerical step raises when it cannot run on an input (a root-finder meeting NaN,

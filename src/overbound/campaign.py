@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import datetime as dt
 import hashlib
 import json
 import os
@@ -42,6 +43,7 @@ import polars as pl
 from overbound import __version__
 from overbound._allocator import keep_freed_memory
 from overbound.io.dataset import Partition, partitions
+from overbound.io.open import filter_time
 from overbound.io.schema import COLUMNS, REQUIRED, InputError
 from overbound.methods.counting import CountingResult
 from overbound.methods.counting_partitions import (
@@ -173,16 +175,40 @@ def _store(path: Path, key: str, value) -> None:
         tmp.unlink(missing_ok=True)
 
 
-def _read(partition: Partition) -> pl.DataFrame:
-    """The counting columns of a partition. A partition of the canonical schema (as ingest and
-    simulate write it) is read as it is; any other goes through the Parquet epoch reader."""
+def _read(partition: Partition, window: Window = None) -> pl.DataFrame:
+    """The counting columns of a partition, its epochs in ``window`` only when it cuts the day.
+    A partition of the canonical schema (as ingest and simulate write it) is read as it is; any
+    other goes through the Parquet epoch reader."""
     schema = pl.read_parquet_schema(partition.path)
     wanted = [*REQUIRED, *(c for c in COUNT_COLUMNS if c in schema)]
     if all(c in schema and schema[c] == COLUMN_TYPES[c] for c in wanted):
-        return pl.read_parquet(partition.path, columns=wanted)
-    from overbound.io.table import read_parquet
+        table = pl.read_parquet(partition.path, columns=wanted)
+    else:
+        from overbound.io.table import read_parquet
 
-    return read_parquet(partition.path, columns=COUNT_COLUMNS)[0]
+        table = read_parquet(partition.path, columns=COUNT_COLUMNS)[0]
+    return table if window is None else filter_time(table, window)
+
+
+Window = tuple[dt.datetime | None, dt.datetime | None] | None
+
+
+def _cut(partition: Partition, window: Window) -> Window:
+    """``window`` when it cuts the partition's day, ``None`` when it holds the whole day."""
+    if window is None:
+        return None
+    start, end = window
+    day = dt.datetime.combine(partition.date, dt.time())
+    cuts = (start is not None and start > day) or (end is not None and end < day + dt.timedelta(days=1))
+    return window if cuts else None
+
+
+def _overlaps(partition: Partition, window: Window) -> bool:
+    if window is None:
+        return True
+    start, end = window
+    day = dt.datetime.combine(partition.date, dt.time())
+    return (start is None or start < day + dt.timedelta(days=1)) and (end is None or end > day)
 
 
 def _failure(partition: Partition, exc: Exception) -> PartitionFailure:
@@ -201,14 +227,14 @@ class _Done:
     computed: int = 0
 
 
-def _first_task(partition: Partition, services, bins: int, use_cache: bool) -> _Done:
+def _first_task(partition: Partition, services, bins: int, use_cache: bool, window: Window) -> _Done:
     keep_freed_memory()  # partition-sized arrays: reuse freed memory (4x faster histograms)
     cache = partition.path.parent / _CACHE_DIR / "pass1.pkl"
     try:
-        key = _key(_file_key(partition.path), _services_key(services), bins)
+        key = _key(_file_key(partition.path), _services_key(services), bins, window)
         if use_cache and (hit := _load_cached(cache, key)) is not None:
             return _Done(hit, cached=1)
-        value = first_pass(_read(partition), services, histogram_bins=bins, label=partition.key)
+        value = first_pass(_read(partition, window), services, histogram_bins=bins, label=partition.key)
     except (InputError, OSError, pl.exceptions.PolarsError, ValueError) as exc:
         return _Done(None, (_failure(partition, exc),))
     if use_cache:
@@ -216,7 +242,7 @@ def _first_task(partition: Partition, services, bins: int, use_cache: bool) -> _
     return _Done(value, computed=1)
 
 
-def _second_task(partition: Partition, plan: SecondPlan, services, use_cache: bool) -> _Done:
+def _second_task(partition: Partition, plan: SecondPlan, services, use_cache: bool, window: Window) -> _Done:
     """Pass 2 of one partition: its values, and its windows when the plan asks; each from the
     cache when its key (and, for values, the bins collected) still holds."""
     keep_freed_memory()
@@ -226,12 +252,12 @@ def _second_task(partition: Partition, plan: SecondPlan, services, use_cache: bo
     cached = computed = 0
     windows = {}
     try:
-        fkey = _file_key(partition.path)
+        fkey = (_file_key(partition.path), window)
         if label in plan.redo:
             wkey = _key(fkey, _services_key(services), windows_plan(plan, station, label))
             hit = _load_cached(folder / "windows.pkl", wkey) if use_cache else None
             if hit is None:
-                table = _read(partition)
+                table = _read(partition, window)
                 hit = second_windows(table, plan, services, label=label)
                 if use_cache:
                     _store(folder / "windows.pkl", wkey, hit)
@@ -245,7 +271,7 @@ def _second_task(partition: Partition, plan: SecondPlan, services, use_cache: bo
             values = stored[1]
             cached += 1
         else:
-            table = _read(partition) if table is None else table
+            table = _read(partition, window) if table is None else table
             values = second_values(table, plan)
             if use_cache:
                 bins = {k: b for k, b in plan.targets.items() if k[0] in (station, "")}
@@ -317,21 +343,25 @@ def count_campaign(
     client=None,
     cache: bool = True,
     histogram_bins: int = 200,
+    time_range: Window = None,
     progress: Callable[[str, int, int], None] | None = None,
 ) -> CampaignCounting:
     """The counting KPIs of every partition of ``dataset``, merged (see the module notes).
 
     ``client``: a ``distributed.Client`` (:func:`campaign_client`), or ``None`` to run in this
-    process. ``progress(stage, done, total)`` is called as partitions are done.
+    process. ``time_range``: ``(start, stop)`` GPS times (naive, ``None`` for open), the epochs
+    ``start <= time < stop`` only; days outside are not read. ``progress(stage, done, total)`` is
+    called as partitions are done.
 
     Raises
     ------
     InputError
         Not a dataset, no partition, or no partition could be read.
     """
-    parts = partitions(dataset)
+    parts = [p for p in partitions(dataset) if _overlaps(p, time_range)]
     if not parts:
-        raise InputError(str(dataset), "the dataset has no partition (ingest inputs first)")
+        what = "in the time range" if time_range else "(ingest inputs first)"
+        raise InputError(str(dataset), f"the dataset has no partition {what}")
     runner = _Local() if client is None else _Dask(client)
     services = tuple(services)
     svc = runner.share(services)
@@ -342,7 +372,7 @@ def count_campaign(
         todo = [p for p in parts if (p.station, p.date.isoformat()) not in failed]
         one = runner.map_reduce(
             _first_task,
-            [(p, svc, histogram_bins, cache) for p in todo],
+            [(p, svc, histogram_bins, cache, _cut(p, time_range)) for p in todo],
             merge_first,
             _ticks(progress, "pass 1", len(todo)),
         )
@@ -356,7 +386,7 @@ def count_campaign(
         todo = [p for p in todo if p.key in read]
         two = runner.map_reduce(
             _second_task,
-            [(p, shared_plan, svc, cache) for p in todo],
+            [(p, shared_plan, svc, cache, _cut(p, time_range)) for p in todo],
             merge_second,
             _ticks(progress, "pass 2", len(todo)),
         )

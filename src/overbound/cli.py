@@ -18,6 +18,7 @@ from rich.progress import BarColumn, Progress, SpinnerColumn, TextColumn, TimeEl
 from rich.table import Table
 
 from overbound import __version__
+from overbound.io.dataset import is_dataset
 from overbound.io.geodesy import Reference
 from overbound.io.open import FORMATS
 from overbound.io.schema import InputError
@@ -223,25 +224,101 @@ def _read_options(reference, reference_ecef, fmt, station, strict, start, end, c
     help="Add the parametric availability, integrity and continuity (Kannemans 2006) of both axes: "
     "OUTPUT/parametric.json.",
 )
+@click.option(
+    "--counting-only",
+    is_flag=True,
+    help="Campaign dataset: the counting KPIs and network results only, without reading the pooled "
+    "table (no methods, no verdicts).",
+)
+@click.option(
+    "--workers",
+    type=click.IntRange(min=0),
+    metavar="N",
+    help="Campaign dataset: N local worker processes (0: this process). Default: this process for a "
+    "dataset under 64 MiB, else one worker per core.",
+)
+@click.option(
+    "--scheduler",
+    metavar="ADDRESS",
+    envvar="DASK_SCHEDULER_ADDRESS",
+    help="Campaign dataset: run on the Dask cluster at ADDRESS (e.g. tcp://host:8786; default "
+    "$DASK_SCHEDULER_ADDRESS); the dataset must be at the same path on its workers.",
+)
+@click.option(
+    "--cache/--no-cache",
+    default=True,
+    show_default=True,
+    help="Campaign dataset: keep partial results per station-day beside the data, and reuse them.",
+)
 @_draws_figures
-def analyze(inputs, out_dir, services, epochs_out, confidence, evt, parametric, **inputs_opts) -> None:
-    """Analyse receiver output INPUTS: write OUTPUT/summary.json and OUTPUT/report.html."""
+def analyze(
+    inputs,
+    out_dir,
+    services,
+    epochs_out,
+    confidence,
+    evt,
+    parametric,
+    counting_only,
+    workers,
+    scheduler,
+    cache,
+    **inputs_opts,
+) -> None:
+    """Analyse receiver output INPUTS, or a campaign dataset: write OUTPUT/summary.json and
+    OUTPUT/report.html.
+
+    A dataset (see 'overbound ingest') is counted station-day by station-day, on Dask workers
+    when it is large, with partial results cached beside the data.
+    """
     read_options = _read_options(**inputs_opts)
+    campaign = len(inputs) == 1 and is_dataset(inputs[0])
+    if (counting_only or workers is not None or scheduler) and not campaign:
+        raise click.UsageError("--counting-only, --workers and --scheduler apply to a campaign dataset")
     with contextlib.ExitStack() as outputs:  # both checked (and locked) before the analysis
         stage = outputs.enter_context(_staged(out_dir, "analyze"))
         epochs_path = _epochs_path(epochs_out, stage, outputs) if epochs_out else None
+        client = outputs.enter_context(_campaign_client(inputs[0], workers, scheduler)) if campaign else None
         paths = _run_analysis(
             list(inputs),
             stage.path,
             services=services,
             epochs_out=epochs_path,
-            confidence=confidence,
-            evt=evt,
-            parametric=parametric,
+            confidence=confidence and not counting_only,
+            evt=evt and not counting_only,
+            parametric=parametric and not counting_only,
+            campaign={"client": client, "counting_only": counting_only, "cache": cache} if campaign else {},
             **read_options,
         )
     click.echo(f"report: {stage.final(paths[1])}")
     click.echo(f"summary: {stage.final(paths[0])}")
+
+
+#: A dataset smaller than this is counted in this process (a cluster costs seconds to start).
+_IN_PROCESS_BYTES = 64 << 20
+
+
+@contextlib.contextmanager
+def _campaign_client(dataset: Path, workers: int | None, scheduler: str | None):
+    """The Dask client of a campaign analysis (``None``: in this process); closed at the end."""
+    from overbound.campaign import campaign_client
+    from overbound.io.dataset import partitions
+
+    if not scheduler:
+        if workers == 0:
+            yield None
+            return
+        if workers is None and sum(p.path.stat().st_size for p in partitions(dataset)) < _IN_PROCESS_BYTES:
+            yield None
+            return
+    client = campaign_client(workers=workers, scheduler=scheduler)
+    try:
+        yield client
+    finally:
+        cluster = client.cluster
+        client.close()
+        if cluster is not None:
+            cluster.close()
 
 
 def _epochs_path(epochs_out: Path, stage: StagedDirectory, outputs: contextlib.ExitStack) -> Path:
@@ -263,9 +340,11 @@ def _run_analysis(
     confidence=True,
     evt=True,
     parametric=True,
+    campaign=None,
     **read_opts,
 ):
-    """Analyse, write summary.json and report.html (and the epoch table); return their paths."""
+    """Analyse, write summary.json and report.html (and the epoch table); return their paths.
+    ``campaign``: the campaign options of :func:`overbound.analysis.analyze` for a dataset."""
     from overbound.analysis import analyze as run
     from overbound.io.table import write_epochs
     from overbound.jsontext import dumps
@@ -299,6 +378,7 @@ def _run_analysis(
             evt=None if evt else (),
             parametric=parametric,
             progress=step,
+            **(campaign or {}),
         )
         out_dir.mkdir(parents=True, exist_ok=True)  # a demo's subdirectory
         for c in result.confidence:
@@ -308,7 +388,7 @@ def _run_analysis(
         if result.parametric is not None:
             write_parametric(result.parametric, out_dir / PARAMETRIC_JSON)
         step("writing summary.json")
-        assessment = assess(result)
+        assessment = assess(result) if result.evidence is not None else None
         options = {
             "services": list(services),
             "confidence": confidence,
@@ -381,6 +461,9 @@ _VERDICT_STYLE = {"pass": "bold green", "fail": "bold red", "not demonstrated": 
 
 def _print_verdicts(assessment) -> None:
     """The verdict matrix, then one line per verdict that is not a pass."""
+    if assessment is None:
+        console.print("verdicts: not assessed (counting only)", highlight=False)
+        return
     from overbound.report.verdicts import KIND_TITLES
     from overbound.verdict import KINDS
 

@@ -28,7 +28,7 @@ import datetime as dt
 import json
 import os
 import re
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -281,7 +281,7 @@ def write_manifest(root: Path, doc: dict) -> None:
 
 
 def read_dataset(
-    path: str | Path, *, columns: Sequence[str] | None = None
+    path: str | Path, *, columns: Sequence[str] | None = None, skip: Collection[str] = ()
 ) -> tuple[pl.DataFrame, ReadReport]:
     """The whole epoch table of a dataset, and a report of what was read.
 
@@ -289,7 +289,8 @@ def read_dataset(
     the one of its inputs read together. ``columns`` is that of
     :func:`~overbound.io.table.read_parquet` (the other columns are not even read);
     :func:`overbound.io.open.read` applies its column and time-window options on top, as for
-    any input.
+    any input. ``skip`` holds partition keys (``station=ID/date=YYYY-MM-DD``) left out, e.g.
+    those a campaign analysis could not read.
 
     Raises
     ------
@@ -299,7 +300,7 @@ def read_dataset(
     from overbound.io.table import read_parquet
 
     root = Path(path)
-    parts = partitions(root)
+    parts = [p for p in partitions(root) if p.key not in skip]
     if not parts:
         raise InputError(str(root), "the dataset has no partition (ingest inputs first)")
     table = pl.concat([read_parquet(p.path, columns=columns)[0] for p in parts], how="diagonal_relaxed")

@@ -229,7 +229,7 @@ def read(
         keep = set(REQUIRED) | set(columns)
         table = table.select([c for c in table.columns if c in keep])
     if time_range is not None:
-        kept = _filter_time(table, time_range)
+        kept = filter_time(table, time_range)
         if dropped := table.height - kept.height:  # counted like any row not kept
             rejected = {**report.rejected, "outside_time_range": dropped}
             report = dataclasses.replace(report, rows_kept=kept.height, rejected=rejected)
@@ -253,9 +253,10 @@ def _read_one(
     return readers[fmt](source, **kwargs)
 
 
-def _filter_time(
+def filter_time(
     table: pl.DataFrame, time_range: tuple[dt.datetime | None, dt.datetime | None]
 ) -> pl.DataFrame:
+    """The epochs with ``start <= time < stop`` (either end ``None``: open)."""
     start, stop = time_range
     expr = pl.lit(True)
     if start is not None:

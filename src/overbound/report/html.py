@@ -44,6 +44,7 @@ from overbound.report.figures import (
     plot_timeseries,
 )
 from overbound.report.json import base_names, dumps, summary_dict
+from overbound.report.network import SORTABLE_SCRIPT, network_section_html
 from overbound.report.page import PAGE_CSS, escape, figure_html, scientific, section_html
 from overbound.report.parametric import parametric_section_html
 from overbound.report.parametric import section_ids as parametric_ids
@@ -97,6 +98,7 @@ def section_ids(analysis: Analysis) -> tuple[str, ...]:
         "overview",
         "accuracy",
         *(("stations",) if analysis.counting.by_station else ()),
+        *(("network",) if analysis.network is not None else ()),
         *(_service_id(group[0]) for group in service_groups(analysis.services)),
         *(f"confidence-{c.axis}" for c in analysis.confidence),
         *(f"{method}-{axis}" for method, axis, _ in analysis.method_failures),
@@ -112,15 +114,21 @@ def render_report(
     analysis: Analysis, *, summary: dict | None = None, assessment: Assessment | None = None
 ) -> str:
     """The text of ``report.html`` (see :func:`write_report`): the verdicts first, then the details."""
-    assessment = assessment if assessment is not None else assess(analysis)
+    if assessment is None and analysis.evidence is not None:
+        assessment = assess(analysis)
     doc = summary if summary is not None else summary_dict(analysis, assessment=assessment)
     c = analysis.counting
     body = [
         _header(analysis),
-        verdict_section(assessment),
+        verdict_section(assessment) if assessment is not None else _no_verdicts(),
         _overview(analysis),
         _accuracy(c),
         *((_stations(analysis),) if c.by_station else ()),
+        *(
+            (network_section_html(doc["network"], analysis.network.daily, analysis.services),)
+            if analysis.network is not None
+            else ()
+        ),
         *(_service(analysis, group) for group in service_groups(analysis.services)),
         *(confidence_section_html(c) for c in analysis.confidence),
         *(_failure_section(*failure) for failure in analysis.method_failures),
@@ -148,7 +156,9 @@ def render_report(
         f"<title>{_e(analysis.title)} — overbound integrity report</title>\n"
         f"<style>{PAGE_CSS}{VERDICT_CSS}</style>\n</head>\n<body>\n<main>\n"
         + resolve_figures("\n".join(body))
-        + "\n</main>\n</body>\n</html>\n"
+        + "\n</main>\n"
+        + (SORTABLE_SCRIPT + "\n" if c.by_station else "")
+        + "</body>\n</html>\n"
     )
 
 
@@ -232,6 +242,8 @@ def _header(a: Analysis) -> str:
             ("verdicts", "Verdicts"),
             ("overview", "Overview"),
             ("accuracy", "Accuracy"),
+            *((("stations", "Stations"),) if a.counting.by_station else ()),
+            *((("network", "Network"),) if a.network is not None else ()),
             *((_service_id(g[0]), " and ".join(s.name for s in g)) for g in service_groups(a.services)),
             *((f"confidence-{c.axis}", f"{c.axis.capitalize()} PL confidence") for c in a.confidence),
             *((f"{m}-{axis}", _failure_label(m, axis)) for m, axis, _ in a.method_failures),
@@ -450,7 +462,12 @@ def _stations(a: Analysis) -> str:
         "Stations",
         f"<p>The same counts for each of the {len(a.counting.by_station)} stations alone; the sections below "
         "pool them (continuity windows never span two stations).</p>\n"
-        + _table(head, rows, caption="Availability in % of each station's epochs."),
+        + _table(
+            head,
+            rows,
+            cls="sortable",
+            caption="Availability in % of each station's epochs; click a column head to sort by it.",
+        ),
     )
 
 
@@ -690,7 +707,24 @@ def _strictest(services: tuple[ServiceLevel, ...], axis: str) -> tuple[float | N
     return al, [n for v, n in limits if v == al]
 
 
+def _no_verdicts() -> str:
+    return _section(
+        "verdicts",
+        "Verdicts",
+        '<p class="alarm">Not assessed: this is a counting-only analysis of a campaign dataset. The '
+        "verdicts weigh the counts with the statistical methods and the counted evidence, which read "
+        "the pooled epoch table; run <code>overbound analyze</code> without <code>--counting-only</code>"
+        " for them.</p>",
+    )
+
+
 def _time_series(a: Analysis) -> str:
+    if a.table.is_empty() and a.network is not None:
+        return _section(
+            "time-series",
+            "Time series",
+            "<p>Not drawn: a counting-only campaign analysis does not read the pooled epoch table.</p>",
+        )
     series, hists = [], []
     for axis in AXES:
         al, names = _strictest(a.services, axis)

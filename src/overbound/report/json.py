@@ -23,6 +23,8 @@ import dataclasses
 import hashlib
 from pathlib import Path
 
+import polars as pl
+
 from overbound import __version__
 from overbound.analysis import Analysis, verdicts
 from overbound.jsontext import dumps, to_jsonable
@@ -152,7 +154,8 @@ def summary_dict(
     their base names, so the same data in another folder give the same bytes.
     """
     c = analysis.counting
-    assessment = assessment if assessment is not None else assess(analysis)
+    if assessment is None and analysis.evidence is not None:
+        assessment = assess(analysis)
     services = {}
     for s in analysis.services:
         k = c.services[s.name]
@@ -184,8 +187,10 @@ def summary_dict(
         "overbound_version": __version__,
         "title": analysis.title,
         "inputs": [_input_dict(r) for r in analysis.reports],
-        "verdicts": verdicts_dict(assessment.services),
-        "verdicts_by_station": {st: verdicts_dict(per) for st, per in assessment.by_station.items()},
+        "verdicts": verdicts_dict(assessment.services) if assessment else {},
+        "verdicts_by_station": (
+            {st: verdicts_dict(per) for st, per in assessment.by_station.items()} if assessment else {}
+        ),
         "provenance": provenance if provenance is not None else provenance_dict(),
         "epochs": {
             "total": c.n_total,
@@ -211,6 +216,45 @@ def summary_dict(
             {"method": method, "axis": axis, "reason": reason}
             for method, axis, reason in analysis.method_failures
         ],
+        **({"network": network_dict(analysis)} if analysis.network is not None else {}),
+    }
+
+
+def network_dict(analysis: Analysis) -> dict:
+    """The ``network`` object of a campaign dataset: partitions analysed and left out, and the
+    availability of every station-day with the daily compliance per service (the share of
+    station-days whose availability meets the service's requirement), per station and pooled."""
+    net = analysis.network
+    daily = net.daily
+    names = [s.name for s in analysis.services]
+    compliance = {}
+    for s in analysis.services:
+        if s.availability is None or daily.is_empty():
+            compliance[s.name] = {"required": s.availability, "network": None, "stations": {}}
+            continue
+        met = daily.with_columns((daily[s.name] >= s.availability).alias("_met"))
+        per = met.group_by("station", maintain_order=True).agg(pl.col("_met").mean())
+        compliance[s.name] = {
+            "required": s.availability,
+            "network": float(met["_met"].mean()),
+            "stations": dict(zip(per["station"].to_list(), per["_met"].to_list(), strict=True)),
+        }
+    return {
+        "partitions": net.n_partitions,
+        "partitions_analysed": net.n_partitions - len(net.failures),
+        "unreadable": [dataclasses.asdict(f) for f in net.failures],
+        "daily_compliance": compliance,
+        "days": {
+            station: [
+                {
+                    "date": r["date"].isoformat(),
+                    "epochs": r["n_epochs"],
+                    "availability": {n: r[n] for n in names},
+                }
+                for r in rows.iter_rows(named=True)
+            ]
+            for (station,), rows in daily.group_by("station", maintain_order=True)
+        },
     }
 
 
