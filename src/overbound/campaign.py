@@ -42,7 +42,7 @@ import polars as pl
 
 from overbound import __version__
 from overbound._allocator import keep_freed_memory
-from overbound.io.dataset import Partition, partitions
+from overbound.io.dataset import Partition, partitions, read_manifest
 from overbound.io.open import filter_time
 from overbound.io.schema import COLUMNS, REQUIRED, InputError
 from overbound.methods.counting import CountingResult
@@ -73,6 +73,8 @@ __all__ = [
 #: Columns a partition is read with for the counting.
 COUNT_COLUMNS = ("alert",)
 COLUMN_TYPES = {c.name: c.dtype for c in COLUMNS}
+#: Columns the percentile values of pass 2 need.
+VALUE_COLUMNS = ("hpe", "vpe", "hpl", "vpl", "alert")
 #: Partials merged per task of the reduction tree.
 SPLIT_EVERY = 32
 _CACHE_DIR = ".overbound"
@@ -101,6 +103,7 @@ class CampaignCounting:
     n_partitions : partitions in the dataset.
     n_cached : partial results taken from the cache (pass 1, windows and values each count).
     n_computed : partial results computed.
+    positions : ``(lat, lon)`` (deg) of the stations whose reference the manifest holds.
     """
 
     counting: CountingResult
@@ -109,6 +112,7 @@ class CampaignCounting:
     n_partitions: int
     n_cached: int
     n_computed: int
+    positions: dict[str, tuple[float, float]] = dataclasses.field(default_factory=dict)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -175,18 +179,18 @@ def _store(path: Path, key: str, value) -> None:
         tmp.unlink(missing_ok=True)
 
 
-def _read(partition: Partition, window: Window = None) -> pl.DataFrame:
-    """The counting columns of a partition, its epochs in ``window`` only when it cuts the day.
-    A partition of the canonical schema (as ingest and simulate write it) is read as it is; any
-    other goes through the Parquet epoch reader."""
+def _read(partition: Partition, window: Window = None, only: Sequence[str] | None = None) -> pl.DataFrame:
+    """The counting columns of a partition (``only`` those of them), its epochs in ``window``
+    only when it cuts the day. A partition of the canonical schema (as ingest and simulate
+    write it) is read as it is; any other goes through the Parquet epoch reader."""
     schema = pl.read_parquet_schema(partition.path)
-    wanted = [*REQUIRED, *(c for c in COUNT_COLUMNS if c in schema)]
+    wanted = [c for c in (*REQUIRED, *COUNT_COLUMNS) if c in schema and (only is None or c in only)]
     if all(c in schema and schema[c] == COLUMN_TYPES[c] for c in wanted):
         table = pl.read_parquet(partition.path, columns=wanted)
     else:
         from overbound.io.table import read_parquet
 
-        table = read_parquet(partition.path, columns=COUNT_COLUMNS)[0]
+        table = read_parquet(partition.path, columns=COUNT_COLUMNS)[0].select(wanted)
     return table if window is None else filter_time(table, window)
 
 
@@ -271,8 +275,9 @@ def _second_task(partition: Partition, plan: SecondPlan, services, use_cache: bo
             values = stored[1]
             cached += 1
         else:
-            table = _read(partition, window) if table is None else table
-            values = second_values(table, plan)
+            if table is None:  # the values need neither times nor station (unless cut by a window)
+                table = _read(partition, window, VALUE_COLUMNS if window is None else None)
+            values = second_values(table, plan, station=station)
             if use_cache:
                 bins = {k: b for k, b in plan.targets.items() if k[0] in (station, "")}
                 _store(folder / "values.pkl", vkey, (bins, values))
@@ -399,8 +404,13 @@ def count_campaign(
     counting = finalize(first, second, plan, services, histogram_bins=histogram_bins)
     order = {(p.station, p.date.isoformat()): i for i, p in enumerate(parts)}
     failures = tuple(sorted(set(failures), key=lambda f: order[(f.station, f.date)]))
+    positions = {
+        name: (float(entry["reference"][0]), float(entry["reference"][1]))
+        for name, entry in read_manifest(dataset).get("stations", {}).items()
+        if name in counting.stations and entry.get("reference")
+    }
     return CampaignCounting(
-        counting, daily_availability(first, services), failures, len(parts), n_cached, n_computed
+        counting, daily_availability(first, services), failures, len(parts), n_cached, n_computed, positions
     )
 
 

@@ -521,14 +521,15 @@ class EpochArrays:
 
     ``pe``: HPE and |VPE| per axis; ``pls``: HPL and VPL, +inf where the receiver alerted (so
     the epoch is unavailable for every service); ``si_pls``: the PLs of the safety index, NaN
-    where alerted (left out); ``ok``: epochs with finite HPE, VPE, HPL and VPL.
+    where alerted (left out); ``ok``: epochs with finite HPE, VPE, HPL and VPL; ``time_us``:
+    ``None`` when the table was read without its times.
     """
 
     pe: dict[str, np.ndarray]
     pls: dict[str, np.ndarray]
     si_pls: dict[str, np.ndarray]
     ok: np.ndarray
-    time_us: np.ndarray
+    time_us: np.ndarray | None
 
 
 def epoch_arrays(table: pl.DataFrame) -> EpochArrays:
@@ -546,7 +547,7 @@ def epoch_arrays(table: pl.DataFrame) -> EpochArrays:
     ok = np.isfinite(hpe) & np.isfinite(vpe) & np.isfinite(hpl) & np.isfinite(vpl)
     pe = {"horizontal": hpe, "vertical": vpe}
     pls = {"horizontal": hpl, "vertical": vpl}
-    return EpochArrays(pe, pls, si_pls, ok, as_numpy(table["time"]))
+    return EpochArrays(pe, pls, si_pls, ok, as_numpy(table["time"]) if "time" in table.columns else None)
 
 
 def histogram_keys(services, bins: int) -> list[tuple[str, float]]:

@@ -224,10 +224,14 @@ def first_pass(
     day = t // _DAY_US
     d0 = int(day[0])
     combined = [k for k in keys if k[0] == "combined"]
-    per_day = np.stack(
-        [np.bincount(day - d0)] + [np.bincount(day - d0, weights=masks[k]).astype(np.int64) for k in combined]
-    )
-    days = {d0 + i: per_day[:, i].astype(np.int64) for i in np.flatnonzero(per_day[0])}
+    if day[-1] == d0:  # the usual partition: one GPS day
+        days = {d0: np.array([t.size] + [np.count_nonzero(masks[k]) for k in combined], dtype=np.int64)}
+    else:
+        per_day = np.stack(
+            [np.bincount(day - d0)]
+            + [np.bincount(day - d0, weights=masks[k]).astype(np.int64) for k in combined]
+        )
+        days = {d0 + i: per_day[:, i].astype(np.int64) for i in np.flatnonzero(per_day[0])}
     steps = step_counts(np.diff(t))
     dt = interval_from_steps(*steps)
     guess = None if dt is None else Guess(int(t[0]), dt, _windows(x, int(t[0]), dt, services, False))
@@ -438,9 +442,12 @@ def second_pass(
     return SecondPass(windows, second_values(table, plan))
 
 
-def second_values(table: pl.DataFrame, plan: SecondPlan) -> dict[tuple[str, str], list[np.ndarray]]:
-    """The partition's values in the percentile target bins of its station and of the network."""
-    name = _station_of(table)
+def second_values(
+    table: pl.DataFrame, plan: SecondPlan, *, station: str | None = None
+) -> dict[tuple[str, str], list[np.ndarray]]:
+    """The partition's values in the percentile target bins of its station and of the network.
+    With ``station`` given, the table needs only the error and PL columns (and ``alert``)."""
+    name = station if station is not None else _station_of(table)
     values = _percentile_values(epoch_arrays(table))
     return {
         (scope, var): [values_in_bins(values[var], plan.targets[(scope, var)])]

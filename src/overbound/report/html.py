@@ -124,11 +124,7 @@ def render_report(
         _overview(analysis),
         _accuracy(c),
         *((_stations(analysis),) if c.by_station else ()),
-        *(
-            (network_section_html(doc["network"], analysis.network.daily, analysis.services),)
-            if analysis.network is not None
-            else ()
-        ),
+        *((_network(analysis, doc["network"]),) if analysis.network is not None else ()),
         *(_service(analysis, group) for group in service_groups(analysis.services)),
         *(confidence_section_html(c) for c in analysis.confidence),
         *(_failure_section(*failure) for failure in analysis.method_failures),
@@ -705,6 +701,15 @@ def _strictest(services: tuple[ServiceLevel, ...], axis: str) -> tuple[float | N
         return None, []
     al = min(v for v, _ in limits)
     return al, [n for v, n in limits if v == al]
+
+
+def _network(a: Analysis, network: dict) -> str:
+    """The network section: daily compliance, heat maps, and the station map."""
+    stations = a.counting.by_station or {a.counting.stations[0]: a.counting}
+    availability = {
+        s.name: {n: c.services[s.name].combined.availability for n, c in stations.items()} for s in a.services
+    }
+    return network_section_html(network, a.network.daily, a.services, a.network.positions, availability)
 
 
 def _no_verdicts() -> str:

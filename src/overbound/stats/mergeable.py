@@ -129,9 +129,14 @@ def rank_bins(counts: BinCounts, q: float) -> tuple[np.ndarray, int]:
 
 
 def values_in_bins(x: np.ndarray, bins: np.ndarray) -> np.ndarray:
-    """Pass 2 on one partition: its values that fall in ``bins``."""
+    """Pass 2 on one partition: its values that fall in ``bins`` (sorted)."""
     x = np.asarray(x, dtype=np.float64)
-    return x[np.isin(_bins(x), bins)]
+    if bins.size == 0:
+        return x[:0]
+    codes = _bins(x)
+    i = np.searchsorted(bins, codes)  # bins are sorted (as rank_bins gives them)
+    np.minimum(i, bins.size - 1, out=i)
+    return x[bins[i] == codes]
 
 
 def exact_percentile(n: int, q: float, below: int, values: np.ndarray) -> float:
