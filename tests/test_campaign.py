@@ -197,3 +197,17 @@ def test_counting_only_on_a_real_scheduler_equals_in_process(
     assert local["verdicts"] == {} and local["network"]["partitions_analysed"] == 21
     html = (tmp_path / "remote" / "report.html").read_text()
     assert 'id="network"' in html and 'data-figure="heatmap-LPV"' in html and "Not assessed" in html
+
+
+def test_time_window_reads_the_days_it_needs_and_cuts_the_edges(dataset: Path, tmp_path: Path) -> None:
+    """--start/--end on a dataset: the epochs start <= t < end, as the pooled table filtered."""
+    import datetime as dt
+
+    import polars as pl
+
+    window = (dt.datetime(2024, 1, 8, 6, 30), dt.datetime(2024, 1, 10))  # cuts one day, ends at midnight
+    table, _ = read_dataset(dataset, columns=("alert",))
+    table = table.filter(pl.col("time") >= window[0], pl.col("time") < window[1])
+    result = count_campaign(_copy(dataset, tmp_path), SERVICES, time_range=window)
+    assert result.n_partitions == 3 * 2  # 2024-01-08 and 2024-01-09 of each station
+    assert_same(result.counting, count_kpis(table, SERVICES))
