@@ -446,6 +446,15 @@ def _print_summary(result, assessment) -> None:
             f"{k.horizontal.stanford.hmi}/{v.hmi if v else '-'}",
         )
     console.print(t)
+    if result.network is not None:
+        net = result.network
+        console.print(
+            f"dataset: {net.n_partitions - len(net.failures)} of {net.n_partitions} station-days analysed; "
+            f"partial results {net.n_cached} from the cache, {net.n_computed} computed",
+            highlight=False,
+        )
+        for f in net.failures:
+            console.print(f"unreadable, left out: {f.station} {f.date}: {f.reason}", highlight=False)
     for axis, reason in result.evt_failures:
         console.print(f"EVT {axis}: no estimate: {reason}", highlight=False, soft_wrap=True)
     for method, axis, reason in result.method_failures:

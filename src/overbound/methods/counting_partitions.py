@@ -108,7 +108,8 @@ _DAY_US = 86_400_000_000
 class Edge:
     """The grid slots at the two ends of one partition: ``a``/``b`` its first and last slot;
     ``head``/``tail`` the slots ``[a, a+W)`` and ``(b-W, b]`` (clipped to the partition): whether
-    each holds an epoch (``present``) and whether that epoch is available, per mask key."""
+    each holds an epoch (``present``, ``W`` the most slots of any window) and whether that epoch is
+    available, per mask key (``up``, ``W`` the most slots of that key's windows)."""
 
     a: int
     b: int
@@ -508,7 +509,8 @@ def _windows(x, t0: int, dt: int, services: Sequence[ServiceLevel], drop_last: b
                 [np.count_nonzero(starts), np.count_nonzero(starts & fail), np.count_nonzero(starts & gap)],
                 dtype=np.int64,
             )
-        head_up[key], tail_up[key] = up[:w_max].copy(), up[size - w_max :].copy()
+        w_key = min(max(window_slots(window, dt / 1e6) for window in ws), size)  # this key's windows
+        head_up[key], tail_up[key] = up[:w_key].copy(), up[size - w_key :].copy()
     edge = Edge(a, b, present[:w_max].copy(), present[size - w_max :].copy(), head_up, tail_up)
     return PartitionWindows(off, windows, edge)
 
@@ -537,12 +539,13 @@ def _boundary_windows(edges: list[Edge], key: tuple, w: int) -> tuple[int, int, 
         lo, hi = max(e.a, e.b - w + 1), e.b + w
         present = np.zeros(hi - lo + 1, dtype=bool)
         up = np.zeros(hi - lo + 1, dtype=bool)
-        tail_lo = e.b - e.tail_present.size + 1
-        _fill(present, up, lo, hi, tail_lo, e.tail_present, e.tail_up[key])
+        _put(present, lo, hi, e.b - e.tail_present.size + 1, e.tail_present)
+        _put(up, lo, hi, e.b - e.tail_up[key].size + 1, e.tail_up[key])
         for f in edges[i + 1 :]:
             if f.a > hi:
                 break
-            _fill(present, up, lo, hi, f.a, f.head_present, f.head_up[key])
+            _put(present, lo, hi, f.a, f.head_present)
+            _put(up, lo, hi, f.a, f.head_up[key])
         starts = np.flatnonzero(up[: e.b - lo + 1])  # strip offsets of available start slots
         counted = starts[starts + lo + w <= b_last]
         n_trunc += starts.size - counted.size
@@ -553,13 +556,11 @@ def _boundary_windows(edges: list[Edge], key: tuple, w: int) -> tuple[int, int, 
     return n, n_fail, n_gap, n_trunc
 
 
-def _fill(present, up, lo: int, hi: int, start: int, src_present, src_up) -> None:
-    """Copy end slots starting at slot ``start`` into the strip ``[lo, hi]`` (later copies win)."""
-    i0, i1 = max(start, lo), min(start + src_present.size - 1, hi)
-    if i1 < i0:
-        return
-    present[i0 - lo : i1 - lo + 1] = src_present[i0 - start : i1 - start + 1]
-    up[i0 - lo : i1 - lo + 1] = src_up[i0 - start : i1 - start + 1]
+def _put(strip: np.ndarray, lo: int, hi: int, start: int, src: np.ndarray) -> None:
+    """Copy end slots starting at slot ``start`` into the strip of slots ``[lo, hi]``."""
+    i0, i1 = max(start, lo), min(start + src.size - 1, hi)
+    if i1 >= i0:
+        strip[i0 - lo : i1 - lo + 1] = src[i0 - start : i1 - start + 1]
 
 
 @dataclass

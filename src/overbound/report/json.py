@@ -14,7 +14,9 @@ message when the axis could not be analysed); the full documents are ``evt-<axis
 being ``parametric.json``. ``verdicts`` holds, per service, the five verdicts and the overall one of
 :mod:`overbound.verdict` (``verdicts_by_station`` the same per station when there are several);
 ``provenance`` the overbound version, the command line, the options and each input's base name, size
-and SHA-256. No absolute path is written anywhere.
+and SHA-256; ``network`` (a campaign dataset only, :func:`network_dict`) the partitions analysed and
+left out, every station-day's availability and the daily compliance. No absolute path is written
+anywhere, nor anything that depends on the cache or the workers.
 """
 
 from __future__ import annotations
