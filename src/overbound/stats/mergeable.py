@@ -6,7 +6,8 @@ gives it on one table. Two passes over the partitions do it exactly:
 
 1. :func:`bin_counts` per partition: how many values fall in each *bin* of an
    order-preserving code of the float64 bits (the top :data:`BITS` bits: sign, exponent and
-   12 bits of mantissa, so a bin spans 1/4096 of an octave); the counts merge by addition
+   8 bits of mantissa, so a bin spans 1/256 of an octave: a day of errors spanning a few
+   octaves fills a thousand or two bins); the counts merge by addition
    (:func:`merge_counts`).
 2. :func:`rank_bins` finds, from the merged counts, the bins holding the two order statistics
    the percentile interpolates between; :func:`values_in_bins` takes, per partition, the few
@@ -35,8 +36,10 @@ __all__ = [
     "values_in_bins",
 ]
 
-#: Bits of the order-preserving code kept as the bin: 1 sign + 11 exponent + 12 mantissa.
-BITS = 24
+#: Bits of the order-preserving code kept as the bin: 1 sign + 11 exponent + 8 mantissa. Fewer
+#: bits: smaller partial results (a day at 1 Hz: ~1.5k bins per variable instead of ~20k at 12
+#: mantissa bits, measured), more values in the second pass (still a few hundred per partition).
+BITS = 20
 _SHIFT = np.uint64(64 - BITS)
 
 
