@@ -15,7 +15,7 @@ import polars as pl
 from overbound.campaign import CampaignCounting, count_campaign
 from overbound.io.dataset import is_dataset, read_dataset, read_manifest
 from overbound.io.geodesy import Reference
-from overbound.io.open import Source, read, source_name
+from overbound.io.open import Source, filter_time, read, source_name
 from overbound.io.schema import InputError, ReadReport, validate_epochs
 from overbound.methods.confidence_level import ConfidenceAnalysis, confidence_analysis
 from overbound.methods.counting import CountingResult, count_kpis
@@ -178,28 +178,25 @@ def analyze(
     The methods and the verdicts' evidence still read the pooled table; with ``counting_only`` they
     are not run and the table is not read (no verdicts: ``evidence`` is ``None``).
     """
+    methods = _Methods(confidence, evt, evt_n_boot, evt_seed, parametric)
     if _is_campaign(inputs, format):
+        if any(x is not None for x in (reference, station, mapping)) or strict:
+            raise InputError(
+                str(inputs[0]),
+                "a dataset is read as ingested: give --reference, --station, --column and --strict to "
+                "'overbound ingest' instead",
+            )
         return _analyze_campaign(
             Path(inputs[0]),
-            services=services,
+            _levels(services),
+            methods,
             title=title,
+            columns=columns,
+            time_range=time_range,
             client=client,
             cache=cache,
             counting_only=counting_only,
             progress=progress,
-            table_options={
-                "reference": reference,
-                "station": station,
-                "strict": strict,
-                "mapping": mapping,
-                "columns": columns,
-                "time_range": time_range,
-                "confidence": confidence,
-                "evt": evt,
-                "evt_n_boot": evt_n_boot,
-                "evt_seed": evt_seed,
-                "parametric": parametric,
-            },
         )
     if isinstance(inputs, pl.DataFrame):
         table, reports = validate_epochs(inputs), ()
@@ -220,37 +217,33 @@ def analyze(
     levels = _levels(services)
     if progress:
         progress("counting KPIs")
-    return _with_methods(
-        table,
-        reports,
-        levels,
-        count_kpis(table, levels),
-        label,
-        confidence,
-        evt,
-        evt_n_boot,
-        evt_seed,
-        parametric,
-        progress,
-    )
+    return _with_methods(table, reports, levels, count_kpis(table, levels), label, methods, progress)
+
+
+@dataclass(frozen=True, slots=True)
+class _Methods:
+    """The methods :func:`analyze` was asked to run (its arguments of the same names)."""
+
+    confidence: Sequence[str] | None
+    evt: Sequence[str] | None
+    evt_n_boot: int
+    evt_seed: int
+    parametric: bool
 
 
 def _with_methods(
-    table,
-    reports,
-    levels,
-    counting,
-    label,
-    confidence,
-    evt,
-    evt_n_boot,
-    evt_seed,
-    parametric,
-    progress,
-    network=None,
+    table: pl.DataFrame,
+    reports: tuple[ReadReport, ...],
+    levels: tuple[ServiceLevel, ...],
+    counting: CountingResult,
+    label: str,
+    methods: _Methods,
+    progress: Callable[[str], None] | None,
+    network: CampaignCounting | None = None,
 ) -> Analysis:
     """The analysis of ``table`` with its ``counting`` done: the evidence and the methods asked."""
     evidence = counted_evidence(table, counting, levels)
+    confidence, evt, parametric = methods.confidence, methods.evt, methods.parametric
     axes = _confidence_axes(table) if confidence is None else tuple(confidence)
     if axes and progress:
         progress("PL confidence level")
@@ -259,7 +252,7 @@ def _with_methods(
         c for a in axes if (c := _guarded(failures, "confidence", a, confidence_analysis, table, axis=a))
     )
     evt_axes = _evt_axes(table) if evt is None else tuple(dict.fromkeys(evt))
-    done, failed = _run_evt(table, evt_axes, levels, evt_n_boot, evt_seed, progress)
+    done, failed = _run_evt(table, evt_axes, levels, methods.evt_n_boot, methods.evt_seed, progress)
     par = None
     if parametric:
         from overbound.methods.parametric import parametric_analysis
@@ -283,50 +276,35 @@ def _is_campaign(inputs, format: str | None) -> bool:
 
 
 def _analyze_campaign(
-    dataset: Path, *, services, title, client, cache, counting_only, progress, table_options
+    dataset: Path,
+    levels: tuple[ServiceLevel, ...],
+    methods: _Methods,
+    *,
+    title: str | None,
+    columns: Sequence[str] | None,
+    time_range: tuple[dt.datetime | None, dt.datetime | None] | None,
+    client,
+    cache: bool,
+    counting_only: bool,
+    progress: Callable[[str], None] | None,
 ) -> Analysis:
     """:func:`analyze` of a campaign dataset (see there)."""
-    opts = dict(table_options)
-    if any(opts[k] is not None for k in ("reference", "station", "mapping")) or opts["strict"]:
-        raise InputError(
-            str(dataset),
-            "a dataset is read as ingested: give --reference, --station, --column and --strict to "
-            "'overbound ingest' instead",
-        )
-    window = opts["time_range"]
-    levels = _levels(services)
 
     def tick(stage: str, done: int, total: int) -> None:
         if progress:
             progress(f"counting KPIs, {stage}: {done}/{total} station-days")
 
-    network = count_campaign(dataset, levels, client=client, cache=cache, time_range=window, progress=tick)
+    network = count_campaign(
+        dataset, levels, client=client, cache=cache, time_range=time_range, progress=tick
+    )
     report = _campaign_report(dataset, network)
     label = title or dataset.name
     if counting_only:
         return Analysis(pl.DataFrame(), (report,), levels, network.counting, label, network=network)
     skip = {f"station={f.station}/date={f.date}" for f in network.failures}
-    table, _ = read_dataset(dataset, columns=opts["columns"], skip=skip)
-    if window is not None:
-        start, end = window
-        table = table.filter(
-            pl.col("time") >= start if start else True, pl.col("time") < end if end else True
-        )
-    table = validate_epochs(table, str(dataset))
-    return _with_methods(
-        table,
-        (report,),
-        levels,
-        network.counting,
-        label,
-        opts["confidence"],
-        opts["evt"],
-        opts["evt_n_boot"],
-        opts["evt_seed"],
-        opts["parametric"],
-        progress,
-        network,
-    )
+    table, _ = read_dataset(dataset, columns=columns, skip=skip)
+    table = validate_epochs(table if time_range is None else filter_time(table, time_range), str(dataset))
+    return _with_methods(table, (report,), levels, network.counting, label, methods, progress, network)
 
 
 def _campaign_report(dataset: Path, network: CampaignCounting) -> ReadReport:

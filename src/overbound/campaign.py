@@ -29,6 +29,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import datetime as dt
+import functools
 import hashlib
 import json
 import os
@@ -156,8 +157,9 @@ def _file_key(path: Path) -> tuple:
     return (__version__, st.st_size, st.st_mtime_ns)
 
 
-def _services_key(services: Sequence[ServiceLevel]) -> list:
-    return [dataclasses.astuple(s) for s in services]
+@functools.cache
+def _services_key(services: tuple[ServiceLevel, ...]) -> str:
+    return json.dumps([dataclasses.astuple(s) for s in services], default=str)
 
 
 def _load_cached(path: Path, key: str):
@@ -323,13 +325,21 @@ class _Dask:
         self.client = client
 
     def map_reduce(self, task, items, merge, progress) -> _Done:
-        from distributed import as_completed
+        """Submit the tasks and the whole merge tree at once, and keep a reference to its root
+        only: each partial is released as soon as its group is merged, so that the workers hold
+        a few groups of partials at a time, never all of them."""
+        import threading
 
-        futures = [self.client.submit(task, *item, pure=False) for item in items]
-        if progress:
-            for _ in as_completed(futures):
+        lock = threading.Lock()
+
+        def done(_future) -> None:  # called in the client's thread as each task ends
+            with lock:
                 progress(1)
-        level = futures
+
+        level = [self.client.submit(task, *item, pure=False) for item in items]
+        if progress:
+            for f in level:
+                f.add_done_callback(done)
         while len(level) > 1:  # consecutive groups: order kept, ties resolved as in one table
             level = [
                 self.client.submit(_merge_done, merge, *level[i : i + SPLIT_EVERY], pure=False)

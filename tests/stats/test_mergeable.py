@@ -57,3 +57,24 @@ def test_merging_is_order_free_and_the_second_pass_is_small() -> None:
 def test_nan_is_refused() -> None:
     with pytest.raises(ValueError, match="NaN"):
         bin_counts(np.array([1.0, np.nan]))
+
+
+def test_values_in_bins_equals_the_bin_test_of_every_value():
+    """The float prefilter of positive bins keeps exactly the values whose bin is asked for: signed
+    zeros, subnormals, infinities and the largest float included."""
+    from overbound.stats.mergeable import _bins, values_in_bins
+
+    special = np.array(
+        [0.0, -0.0, 1e-300, -1e-300, np.inf, -np.inf, 2.0, -2.0, 5e-324, -5e-324, 1.8e308, 3.0]
+    )
+    rng = np.random.default_rng(5)
+    for x in (special, np.concatenate([rng.normal(0, 3, 4000), rng.exponential(2, 4000), special])):
+        codes = _bins(x)
+        distinct = np.unique(codes)
+        pairs = [(i, j) for i in range(distinct.size) for j in range(i, distinct.size)]
+        if len(pairs) > 400:  # the random array: 400 ranges of bins drawn
+            pairs = [pairs[k] for k in rng.choice(len(pairs), 400, replace=False)]
+        for i, j in pairs:
+            wanted = distinct[i : j + 1 : max(1, (j - i) // 3)]
+            got, ref = np.sort(values_in_bins(x, wanted)), np.sort(x[np.isin(codes, wanted)])
+            assert np.array_equal(got, ref) and np.array_equal(np.signbit(got), np.signbit(ref))

@@ -412,8 +412,13 @@ def _widened(present: np.ndarray, rank: np.ndarray) -> np.ndarray:
 def covers(collected: dict, plan: SecondPlan, scopes: Iterable[str]) -> bool:
     """Whether values ``collected`` by :func:`second_values` (against an earlier plan: their
     bins per ``(scope, variable)``) hold every value ``plan`` needs for ``scopes``."""
+    have: dict = {}
     for (scope, var, _q), (rank, _below) in plan.below.items():
-        if scope in scopes and not np.isin(rank, collected.get((scope, var), np.empty(0, np.uint64))).all():
+        if scope not in scopes:
+            continue
+        if (scope, var) not in have:
+            have[(scope, var)] = set(collected.get((scope, var), np.empty(0, np.uint64)).tolist())
+        if not have[(scope, var)].issuperset(rank.tolist()):
             return False
     return True
 
@@ -490,24 +495,33 @@ def _windows(x, t0: int, dt: int, services: Sequence[ServiceLevel], drop_last: b
         return PartitionWindows(off, {}, None)
     a, b = int(k[0]), int(k[-1])
     size = b - a + 1
-    present = np.zeros(size, dtype=bool)
-    present[k - a] = True
-    empty_prefix = prefix_counts(~present)
+    # one epoch in every slot (the usual day: no gap, no two epochs in one slot): slots are rows
+    full = size == k.size and bool(np.all(k[1:] != k[:-1]))
+    present = np.ones(size, dtype=bool)
+    if not full:
+        present[:] = False
+        present[k - a] = True
+    empty_prefix = None if full else prefix_counts(~present)
     w_max = min(_max_slots(services, dt), size)
     windows, head_up, tail_up = {}, {}, {}
     for key, ws in keys.items():
-        up = np.zeros(size, dtype=bool)
-        up[k - a] = masks[key]
+        if full:
+            up = masks[key]
+        else:
+            up = np.zeros(size, dtype=bool)
+            up[k - a] = masks[key]
         lost_prefix = prefix_counts(~up)
         for window in ws:
             w = window_slots(window, dt / 1e6)
             m = max(size - w, 0)  # windows starting at 0..m-1 end inside the partition
             starts = up[:m]
             fail = lost_prefix[w + 1 : w + 1 + m] != lost_prefix[1 : 1 + m]
-            gap = empty_prefix[w + 1 : w + 1 + m] != empty_prefix[1 : 1 + m]
+            n_gap = 0
+            if empty_prefix is not None:
+                gap = empty_prefix[w + 1 : w + 1 + m] != empty_prefix[1 : 1 + m]
+                n_gap = np.count_nonzero(starts & gap)
             windows[(key, window)] = np.array(
-                [np.count_nonzero(starts), np.count_nonzero(starts & fail), np.count_nonzero(starts & gap)],
-                dtype=np.int64,
+                [np.count_nonzero(starts), np.count_nonzero(starts & fail), n_gap], dtype=np.int64
             )
         w_key = min(max(window_slots(window, dt / 1e6) for window in ws), size)  # this key's windows
         head_up[key], tail_up[key] = up[:w_key].copy(), up[size - w_key :].copy()
@@ -601,10 +615,13 @@ def _station_continuity(sw: _StationWindows, grid, key: tuple, window_s: float):
     return continuity_result(n + bn, n_fail + bf, n_gap + bg, bt, window_s, interval_s, sw.n_off_grid)
 
 
-def _percentile(plan: SecondPlan, second: SecondPass, n: int, scope: str, var: str, q: float) -> float:
+def _percentile(
+    plan: SecondPlan, second: SecondPass, memo: dict, n: int, scope: str, var: str, q: float
+) -> float:
     bins, below = plan.below[(scope, var, q)]
-    values = np.concatenate(second.values.get((scope, var), [np.empty(0)]))
-    return exact_percentile(n, q, below, values_in_bins(values, bins))
+    if (scope, var) not in memo:
+        memo[(scope, var)] = np.concatenate(second.values.get((scope, var), [np.empty(0)]))
+    return exact_percentile(n, q, below, values_in_bins(memo[(scope, var)], bins))
 
 
 def _result(
@@ -616,21 +633,26 @@ def _result(
     scope: str,
     histograms: dict,
     by_station: dict,
+    memo: dict,
 ) -> CountingResult:
+    """The result of stations ``names``; ``memo`` keeps each station's continuity counts and
+    the gathered percentile values between the calls of one :func:`finalize`."""
     sts = [first.stations[n] for n in names]
     n_total = sum(s.n_total for s in sts)
     n_ok = sum(s.n_ok for s in sts)
     n_available = _sum_dicts(s.n_available for s in sts)
     regions = _sum_dicts(s.regions for s in sts)
     counts = {k: StanfordCounts(*(int(c) for c in v)) for k, v in regions.items()}
-    cache: dict = {}
-    station_windows = {n: _station_windows(first.stations[n], second, plan, n) for n in names}
+
+    def station(n: str, key: tuple, window_s: float):
+        if ("windows", n) not in memo:
+            memo[("windows", n)] = _station_windows(first.stations[n], second, plan, n)
+        if (n, key, window_s) not in memo:
+            memo[(n, key, window_s)] = _station_continuity(memo[("windows", n)], plan.grids[n], key, window_s)
+        return memo[(n, key, window_s)]
 
     def continuity(key, window_s):
-        if (key, window_s) not in cache:
-            parts = [_station_continuity(station_windows[n], plan.grids[n], key, window_s) for n in names]
-            cache[(key, window_s)] = sum_continuity(parts, window_s)
-        return cache[(key, window_s)]
+        return sum_continuity([station(n, key, window_s) for n in names], window_s)
 
     safety = {}
     for axis in AXES:
@@ -644,7 +666,7 @@ def _result(
         for s in sts:
             best = _later_max(best, s.si_max[axis])
         pct = {
-            k: _percentile(plan, second, n_si, scope, var, q)
+            k: _percentile(plan, second, memo, n_si, scope, var, q)
             for k, q in zip(keys, SAFETY_PERCENTILES, strict=True)
         }
         safety[axis] = SafetyIndex(n_si, best[0], _iso(best[1]), pct)
@@ -656,8 +678,8 @@ def _result(
         stations=tuple(names),
         start=_iso(min(starts)) if starts else None,
         end=_iso(max(ends)) if ends else None,
-        hpe95=_percentile(plan, second, n_ok, scope, "hpe", 95.0) if n_ok else None,
-        vpe95=_percentile(plan, second, n_ok, scope, "vpe", 95.0) if n_ok else None,
+        hpe95=_percentile(plan, second, memo, n_ok, scope, "hpe", 95.0) if n_ok else None,
+        vpe95=_percentile(plan, second, memo, n_ok, scope, "vpe", 95.0) if n_ok else None,
         safety=safety,
         services={s.name: service_kpi(s, n_total, n_available, counts, continuity) for s in services},
         histograms=histograms,
@@ -690,10 +712,11 @@ def finalize(
         counts2d = dense.reshape(histogram_bins, histogram_bins)
         edges = np.linspace(0.0, key[1], histogram_bins + 1)
         hist[key] = StanfordHistogram(key[0], edges, np.ascontiguousarray(counts2d), int(clipped))
+    memo: dict = {}
     if len(names) <= 1:
-        return _result(names, first, second, plan, services, names[0] if names else "", hist, {})
-    by_station = {n: _result([n], first, second, plan, services, n, {}, {}) for n in names}
-    return _result(names, first, second, plan, services, "", hist, by_station)
+        return _result(names, first, second, plan, services, names[0] if names else "", hist, {}, memo)
+    by_station = {n: _result([n], first, second, plan, services, n, {}, {}, memo) for n in names}
+    return _result(names, first, second, plan, services, "", hist, by_station, memo)
 
 
 def daily_availability(first: FirstPass, services: Sequence[ServiceLevel]) -> pl.DataFrame:

@@ -136,10 +136,25 @@ def values_in_bins(x: np.ndarray, bins: np.ndarray) -> np.ndarray:
     x = np.asarray(x, dtype=np.float64)
     if bins.size == 0:
         return x[:0]
+    # positive finite bins (errors, safety indices): first the few values between the first and
+    # the last bin by two float comparisons, then their bins; otherwise the bins of all
+    lo, hi = _bin_start(int(bins[0])), _bin_start(int(bins[-1]) + 1)
+    if lo > 0 and np.isfinite(hi):
+        x = x[(x >= lo) & (x < hi)]
     codes = _bins(x)
     i = np.searchsorted(bins, codes)  # bins are sorted (as rank_bins gives them)
     np.minimum(i, bins.size - 1, out=i)
     return x[bins[i] == codes]
+
+
+def _bin_start(code: int) -> float:
+    """The smallest float64 of bin ``code`` (the inverse of :func:`_bins` on the bin's lowest
+    key); NaN where that key is no number, +inf past the last bin. Used for positive bins only."""
+    if code >= 1 << BITS:
+        return float("inf")
+    key = np.uint64(code) << _SHIFT
+    u = key ^ np.uint64(1 << 63) if key >> np.uint64(63) else ~key
+    return float(np.array([u], dtype=np.uint64).view(np.float64)[0])
 
 
 def exact_percentile(n: int, q: float, below: int, values: np.ndarray) -> float:
