@@ -78,7 +78,10 @@ def run(cmd: list[str]) -> tuple[float, float, str]:
 
 def analyze(dataset: Path, out: Path, *extra: str) -> tuple[float, float]:
     cmd = [sys.executable, "-m", "overbound", "analyze", str(dataset), "-o", str(out), "--counting-only"]
-    wall, peak, _ = run([*cmd, *extra])
+    wall, peak, text = run([*cmd, *extra])
+    for line in text.splitlines():
+        if line.startswith("dataset:"):
+            print(f"    {line}")
     return wall, peak
 
 

@@ -306,13 +306,17 @@ def _merge_done(merge: Callable, *parts: _Done) -> _Done:
 class _Local:
     """Tasks run in this process, one after the other."""
 
-    def map_reduce(self, task, items, merge, progress) -> _Done:
-        done = []
-        for item in items:
-            done.append(task(*item))
-            if progress:
-                progress(1)
-        return _merge_done(merge, *done)
+    def map_reduce(self, task, groups, merge, progress) -> list[_Done]:
+        """One merged :class:`_Done` per group of task arguments."""
+        out = []
+        for items in groups:
+            done = []
+            for item in items:
+                done.append(task(*item))
+                if progress:
+                    progress(1)
+            out.append(_merge_done(merge, *done))
+        return out
 
     def share(self, value):
         return value
@@ -324,10 +328,10 @@ class _Dask:
     def __init__(self, client) -> None:
         self.client = client
 
-    def map_reduce(self, task, items, merge, progress) -> _Done:
-        """Submit the tasks and the whole merge tree at once, and keep a reference to its root
-        only: each partial is released as soon as its group is merged, so that the workers hold
-        a few groups of partials at a time, never all of them."""
+    def map_reduce(self, task, groups, merge, progress) -> list[_Done]:
+        """One merged :class:`_Done` per group of task arguments. The tasks and the merge trees are
+        submitted at once, and only the roots are kept: each partial is released as soon as its
+        group is merged, so that the workers hold a few groups of partials, never all of them."""
         import threading
 
         lock = threading.Lock()
@@ -336,16 +340,19 @@ class _Dask:
             with lock:
                 progress(1)
 
-        level = [self.client.submit(task, *item, pure=False) for item in items]
-        if progress:
-            for f in level:
-                f.add_done_callback(done)
-        while len(level) > 1:  # consecutive groups: order kept, ties resolved as in one table
-            level = [
-                self.client.submit(_merge_done, merge, *level[i : i + SPLIT_EVERY], pure=False)
-                for i in range(0, len(level), SPLIT_EVERY)
-            ]
-        return level[0].result() if level else _Done(None)
+        roots = []
+        for items in groups:
+            level = [self.client.submit(task, *item, pure=False) for item in items]
+            if progress:
+                for f in level:
+                    f.add_done_callback(done)
+            while len(level) > 1:  # consecutive groups: order kept, ties resolved as in one table
+                level = [
+                    self.client.submit(_merge_done, merge, *level[i : i + SPLIT_EVERY], pure=False)
+                    for i in range(0, len(level), SPLIT_EVERY)
+                ]
+            roots.append(level[0] if level else None)
+        return [r.result() if r is not None else _Done(None) for r in roots]
 
     def share(self, value):
         return self.client.scatter(value, broadcast=True, hash=False)
@@ -384,27 +391,16 @@ def count_campaign(
     n_cached = n_computed = 0
     while True:  # again without a partition that fails in pass 2 (its pass 1 is then cached)
         failed = {(f.station, f.date) for f in failures}
-        todo = [p for p in parts if (p.station, p.date.isoformat()) not in failed]
-        one = runner.map_reduce(
-            _first_task,
-            [(p, svc, histogram_bins, cache, _cut(p, time_range)) for p in todo],
-            merge_first,
-            _ticks(progress, "pass 1", len(todo)),
-        )
+        by_station = _by_station([p for p in parts if (p.station, p.date.isoformat()) not in failed])
+        keys = {n: _station_key(ps, services, histogram_bins, time_range) for n, ps in by_station.items()}
+        opts = {"cache": cache, "window": time_range, "progress": progress, "dataset": dataset}
+        one = _pass_one(runner, by_station, keys, svc, histogram_bins, **opts)
         first: FirstPass | None = one.partial
         if first is None or not first.stations:
             why = "; ".join(f"{f.station} {f.date}: {f.reason}" for f in (failures + one.failures)[:3])
             raise InputError(str(dataset), f"no partition could be read ({why})")
         plan = plan_second(first, services)
-        read = {label for st in first.stations.values() for label in st.labels}  # not failed, not empty
-        shared_plan = runner.share(plan)
-        todo = [p for p in todo if p.key in read]
-        two = runner.map_reduce(
-            _second_task,
-            [(p, shared_plan, svc, cache, _cut(p, time_range)) for p in todo],
-            merge_second,
-            _ticks(progress, "pass 2", len(todo)),
-        )
+        two = _pass_two(runner, by_station, keys, first, plan, svc, **opts)
         failures += one.failures + two.failures
         n_cached += one.cached + two.cached
         n_computed += one.computed + two.computed
@@ -422,6 +418,124 @@ def count_campaign(
     return CampaignCounting(
         counting, daily_availability(first, services), failures, len(parts), n_cached, n_computed, positions
     )
+
+
+def _pass_one(runner, by_station, keys, svc, bins, *, cache, window, progress, dataset) -> _Done:
+    """Pass 1 of every station (:func:`_stations_pass`)."""
+    return _stations_pass(
+        runner,
+        by_station,
+        "pass1.pkl",
+        keys.__getitem__,
+        lambda name, ps: [(p, svc, bins, cache, _cut(p, window)) for p in ps],
+        _first_task,
+        merge_first,
+        cache,
+        _ticks(progress, "pass 1", sum(map(len, by_station.values()))),
+        dataset,
+    )
+
+
+def _pass_two(runner, by_station, keys, first, plan, svc, *, cache, window, progress, dataset) -> _Done:
+    """Pass 2 of every station read in pass 1; a station's cached values hold while they cover
+    the plan's rank bins."""
+    read = {label for st in first.stations.values() for label in st.labels}  # not failed, not empty
+    by_station = {n: [p for p in ps if p.key in read] for n, ps in by_station.items()}
+    by_station = {n: ps for n, ps in by_station.items() if ps}
+    shared_plan = runner.share(plan)
+
+    def bins(name: str) -> dict:
+        return {k: b for k, b in plan.targets.items() if k[0] in (name, "")}
+
+    return _stations_pass(
+        runner,
+        by_station,
+        "pass2.pkl",
+        lambda name: _key(keys[name], _plan_key(plan, first.stations[name].labels, name)),
+        lambda name, ps: [(p, shared_plan, svc, cache, _cut(p, window)) for p in ps],
+        _second_task,
+        merge_second,
+        cache,
+        _ticks(progress, "pass 2", sum(map(len, by_station.values()))),
+        dataset,
+        check=lambda name, stored: covers(stored[0], plan, (name, "")),
+        wrap=lambda name, partial: (bins(name), partial),
+    )
+
+
+def _by_station(parts: list[Partition]) -> dict[str, list[Partition]]:
+    out: dict[str, list[Partition]] = {}
+    for p in parts:
+        out.setdefault(p.station, []).append(p)
+    return out
+
+
+def _station_key(parts: list[Partition], services, bins: int, window: Window) -> str:
+    """What a station's merged pass 1 depends on: each partition's file key, and the options."""
+    files = [(p.key, _file_key(p.path), _cut(p, window)) for p in parts]
+    return _key(files, _services_key(services), bins)
+
+
+def _plan_key(plan: SecondPlan, labels: list[str], station: str) -> str:
+    """What a station's pass 2 reads from the plan besides the percentile bins (checked apart)."""
+    mine = set(labels)
+    return _key(
+        plan.grids.get(station),
+        plan.slots.get(station),
+        sorted(plan.redo & mine),
+        sorted(plan.drop_last & mine),
+    )
+
+
+def _stations_pass(
+    runner,
+    by_station: dict[str, list[Partition]],
+    cache_name: str,
+    station_key: Callable[[str], str],
+    items: Callable[[str, list[Partition]], list[tuple]],
+    task: Callable,
+    merge: Callable,
+    use_cache: bool,
+    progress,
+    dataset: str | Path,
+    check: Callable[[str, object], bool] | None = None,
+    wrap: Callable[[str, object], object] | None = None,
+) -> _Done:
+    """One pass over the stations. A station whose merged partial is in its cache
+    (``<dataset>/station=ID/.overbound/<cache_name>``, under ``station_key``) is taken whole;
+    the others run ``task`` per partition (each with its own cache), merged per station, and are
+    cached when no partition failed. ``wrap(name, partial)`` is what is stored (the partial when
+    ``None``) and ``check(name, stored)`` whether a stored one still holds, its partial being its
+    last item. The stations' partials are merged in order."""
+    root = Path(dataset)
+    hits, todo = {}, {}
+    for name, ps in by_station.items():
+        path = root / f"station={name}" / _CACHE_DIR / cache_name
+        hit = _load_cached(path, station_key(name)) if use_cache else None
+        if hit is not None and (check is None or check(name, hit)):
+            hits[name] = hit if wrap is None else hit[-1]
+            if progress:
+                progress(len(ps))
+        else:
+            todo[name] = ps
+    results = runner.map_reduce(task, [items(n, ps) for n, ps in todo.items()], merge, progress)
+    done = dict(zip(todo, results, strict=True))
+    parts, failures, cached, computed = [], [], 0, 0
+    for name, ps in by_station.items():
+        if name in hits:
+            parts.append(hits[name])
+            cached += len(ps)
+            continue
+        d = done[name]
+        failures.extend(d.failures)
+        cached, computed = cached + d.cached, computed + d.computed
+        if d.partial is None:
+            continue
+        parts.append(d.partial)
+        if use_cache and not d.failures:
+            value = d.partial if wrap is None else wrap(name, d.partial)
+            _store(root / f"station={name}" / _CACHE_DIR / cache_name, station_key(name), value)
+    return _Done(merge(*parts) if parts else None, tuple(failures), cached, computed)
 
 
 def _ticks(progress, stage: str, total: int) -> Callable[[int], None] | None:
