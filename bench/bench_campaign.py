@@ -135,7 +135,8 @@ def main() -> None:
     per_core = r["epochs"] / r["count"] / 1e6
     print(
         f"anchor, today's single-table path on one station-year ({r['epochs']:,} epochs): "
-        f"read {r['read']:.1f} s, count_kpis {r['count']:.1f} s = {per_core:.2f} M epochs/s, peak {peak:.0f} MB"
+        f"read {r['read']:.1f} s, count_kpis {r['count']:.1f} s = {per_core:.2f} M epochs/s, "
+        f"peak {peak:.0f} MB"
     )
     print(
         f"campaign counting vs the anchor per core: "
