@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from overbound.campaign import campaign_client, count_campaign
+from overbound.campaign import campaign_client, count_campaign, uncached_partitions
 from overbound.io.dataset import partitions, read_dataset
 from overbound.methods.counting import count_kpis
 from overbound.services import resolve_services
@@ -72,6 +72,9 @@ def test_cache_is_reused_then_invalidated(dataset: Path, pooled, tmp_path: Path)
     third = count_campaign(ds, SERVICES)
     assert 1 <= third.n_computed <= 3, third.n_computed  # pass 1, maybe values and windows
     assert_same(third.counting, pooled)
+    assert uncached_partitions(ds, SERVICES) == 0
+    os.utime(part, ns=(time.time_ns(), time.time_ns() + 2 * 10**9))
+    assert uncached_partitions(ds, SERVICES) == 1  # what the command weighs against a cluster
     # a stale cache entry of another overbound version is never used
     for cache in ds.rglob(".overbound/pass1.pkl"):
         cache.write_bytes(b"not a pickle")

@@ -69,6 +69,7 @@ __all__ = [
     "PartitionFailure",
     "campaign_client",
     "count_campaign",
+    "uncached_partitions",
 ]
 
 #: Columns a partition is read with for the counting.
@@ -162,11 +163,15 @@ def _services_key(services: tuple[ServiceLevel, ...]) -> str:
     return json.dumps([dataclasses.astuple(s) for s in services], default=str)
 
 
-def _load_cached(path: Path, key: str):
+def _load_cached(path: Path, key: str | None):
+    """The value cached at ``path`` under ``key`` (``None`` if absent, unreadable or another key);
+    with ``key=None``, the key it was stored under."""
     try:
         stored_key, value = pickle.loads(zlib.decompress(path.read_bytes()))
     except (OSError, ValueError, zlib.error, pickle.UnpicklingError, EOFError):
         return None
+    if key is None:
+        return stored_key
     return value if stored_key == key else None
 
 
@@ -461,6 +466,34 @@ def _pass_two(runner, by_station, keys, first, plan, svc, *, cache, window, prog
         check=lambda name, stored: covers(stored[0], plan, (name, "")),
         wrap=lambda name, partial: (bins(name), partial),
     )
+
+
+def uncached_partitions(
+    dataset: str | Path,
+    services: Sequence[ServiceLevel],
+    *,
+    histogram_bins: int = 200,
+    time_range: Window = None,
+) -> int:
+    """How many partitions :func:`count_campaign` would read for pass 1 (its partial not cached):
+    the work a cluster would be started for. Reads the cache keys only (no partition)."""
+    parts = [p for p in partitions(dataset) if _overlaps(p, time_range)]
+    services = tuple(services)
+    n = 0
+    for name, ps in _by_station(parts).items():
+        station = Path(dataset) / f"station={name}" / _CACHE_DIR / "pass1.pkl"
+        if _cached_key(station) == _station_key(ps, services, histogram_bins, time_range):
+            continue
+        skey = _services_key(services)
+        for p in ps:
+            key = _key(_file_key(p.path), skey, histogram_bins, _cut(p, time_range))
+            n += _cached_key(p.path.parent / _CACHE_DIR / "pass1.pkl") != key
+    return n
+
+
+def _cached_key(path: Path) -> str | None:
+    """The key a cache file was stored under (``None``: no readable cache)."""
+    return _load_cached(path, None)
 
 
 def _by_station(parts: list[Partition]) -> dict[str, list[Partition]]:

@@ -235,7 +235,8 @@ def _read_options(reference, reference_ecef, fmt, station, strict, start, end, c
     type=click.IntRange(min=0),
     metavar="N",
     help="Campaign dataset: N local worker processes (0: this process). Default: this process for a "
-    "dataset under 64 MiB, else one worker per core.",
+    "dataset under 64 MiB or whose partials are cached but for a few station-days, else one worker "
+    "per core.",
 )
 @click.option(
     "--scheduler",
@@ -278,7 +279,12 @@ def analyze(
     with contextlib.ExitStack() as outputs:  # both checked (and locked) before the analysis
         stage = outputs.enter_context(_staged(out_dir, "analyze"))
         epochs_path = _epochs_path(epochs_out, stage, outputs) if epochs_out else None
-        client = outputs.enter_context(_campaign_client(inputs[0], workers, scheduler)) if campaign else None
+        small = functools.partial(_small_campaign, inputs[0], services, read_options["time_range"], cache)
+        client = (
+            outputs.enter_context(_campaign_client(inputs[0], workers, scheduler, small))
+            if campaign
+            else None
+        )
         paths = _run_analysis(
             list(inputs),
             stage.path,
@@ -296,19 +302,21 @@ def analyze(
 
 #: A dataset smaller than this is counted in this process (a cluster costs seconds to start).
 _IN_PROCESS_BYTES = 64 << 20
+#: A dataset whose partials are cached but for this many partitions is counted in this process.
+_IN_PROCESS_UNCACHED = 64
 
 
 @contextlib.contextmanager
-def _campaign_client(dataset: Path, workers: int | None, scheduler: str | None):
-    """The Dask client of a campaign analysis (``None``: in this process); closed at the end."""
+def _campaign_client(dataset: Path, workers: int | None, scheduler: str | None, in_process):
+    """The Dask client of a campaign analysis (``None``: in this process); closed at the end.
+    ``in_process()`` says whether the work left is small enough not to start a cluster."""
     from overbound.campaign import campaign_client
-    from overbound.io.dataset import partitions
 
     if not scheduler:
         if workers == 0:
             yield None
             return
-        if workers is None and sum(p.path.stat().st_size for p in partitions(dataset)) < _IN_PROCESS_BYTES:
+        if workers is None and in_process():
             yield None
             return
     client = campaign_client(workers=workers, scheduler=scheduler)
@@ -319,6 +327,19 @@ def _campaign_client(dataset: Path, workers: int | None, scheduler: str | None):
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def _small_campaign(dataset: Path, services, time_range, cache: bool) -> bool:
+    """Under 64 MiB of partitions, or (with the cache) under 64 partitions not cached: a cluster
+    would take longer to start than the work."""
+    from overbound.campaign import uncached_partitions
+    from overbound.io.dataset import partitions
+    from overbound.services import resolve_services
+
+    if sum(p.path.stat().st_size for p in partitions(dataset)) < _IN_PROCESS_BYTES:
+        return True
+    levels = resolve_services(list(services) or None)
+    return cache and uncached_partitions(dataset, levels, time_range=time_range) <= _IN_PROCESS_UNCACHED
 
 
 def _epochs_path(epochs_out: Path, stage: StagedDirectory, outputs: contextlib.ExitStack) -> Path:
