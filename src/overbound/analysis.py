@@ -301,8 +301,7 @@ def _analyze_campaign(
     label = title or dataset.name
     if counting_only:
         return Analysis(pl.DataFrame(), (report,), levels, network.counting, label, network=network)
-    skip = {f"station={f.station}/date={f.date}" for f in network.failures}
-    table, _ = read_dataset(dataset, columns=columns, skip=skip)
+    table, _ = read_dataset(dataset, columns=columns, skip={f.key for f in network.failures})
     table = validate_epochs(table if time_range is None else filter_time(table, time_range), str(dataset))
     return _with_methods(table, (report,), levels, network.counting, label, methods, progress, network)
 

@@ -15,13 +15,17 @@ use their own threads). ``client=None`` runs every task in this process (small d
 
 Cache
 -----
-Partials are kept beside the data, ``<partition dir>/.overbound/<kind>.pkl`` (zlib-compressed
-pickles written by this package: load only datasets you trust, as for any pickle), each with a
-key of what it depends on: the overbound version, the partition file's size and modification
-time (partitions are replaced by rename, so a new file has a new time), the services, and for
-pass 2 the part of the plan it read. A key that differs means recompute; a cache that cannot be
-written (read-only dataset) is skipped. So re-analysing after one day was added reads about one
-partition, plus those whose pass-2 inputs moved.
+Partials are kept beside the data (zlib-compressed pickles written by this package: load only
+datasets you trust, as for any pickle): per partition, ``<partition dir>/.overbound/`` holds its
+pass 1 (``pass1.pkl``), its pass-2 values (``values.pkl``, with the bins they were collected for)
+and, where pass 2 recounts them, its windows (``windows.pkl``); per station,
+``station=ID/.overbound/pass1.pkl`` and ``pass2.pkl`` hold its merged partials. Each is stored
+with a key of what it depends on: the overbound version, the partition files' size and
+modification time (partitions are replaced by rename, so a new file has a new time), the
+services, the time window, and for pass 2 the part of the plan it read; stored values hold while
+their bins cover the new rank bins. A key that differs means recompute; a cache that cannot be
+written (read-only dataset) is skipped. So re-analysing after one day was added reads one file
+per unchanged station, the cached partials of the changed one, and the new partition.
 """
 
 from __future__ import annotations
@@ -43,7 +47,7 @@ import polars as pl
 
 from overbound import __version__
 from overbound._allocator import keep_freed_memory
-from overbound.io.dataset import Partition, partitions, read_manifest
+from overbound.io.dataset import Partition, partition_key, partitions, read_manifest
 from overbound.io.open import filter_time
 from overbound.io.schema import COLUMNS, REQUIRED, InputError
 from overbound.methods.counting import CountingResult
@@ -60,6 +64,7 @@ from overbound.methods.counting_partitions import (
     plan_second,
     second_values,
     second_windows,
+    station_targets,
     windows_plan,
 )
 from overbound.services import ServiceLevel
@@ -89,6 +94,11 @@ class PartitionFailure:
     station: str
     date: str
     reason: str
+
+    @property
+    def key(self) -> str:
+        """The partition's key, as :attr:`~overbound.io.dataset.Partition.key`."""
+        return partition_key(self.station, self.date)
 
 
 @dataclass(frozen=True)
@@ -238,11 +248,16 @@ class _Done:
     computed: int = 0
 
 
+def _pass1_key(partition: Partition, services, bins: int, window: Window) -> str:
+    """What a partition's pass 1 depends on (``window`` as :func:`_cut` gives it)."""
+    return _key(_file_key(partition.path), _services_key(services), bins, window)
+
+
 def _first_task(partition: Partition, services, bins: int, use_cache: bool, window: Window) -> _Done:
     keep_freed_memory()  # partition-sized arrays: reuse freed memory (4x faster histograms)
-    cache = partition.path.parent / _CACHE_DIR / "pass1.pkl"
+    cache = _partition_cache(partition, "pass1.pkl")
     try:
-        key = _key(_file_key(partition.path), _services_key(services), bins, window)
+        key = _pass1_key(partition, services, bins, window)
         if use_cache and (hit := _load_cached(cache, key)) is not None:
             return _Done(hit, cached=1)
         value = first_pass(_read(partition, window), services, histogram_bins=bins, label=partition.key)
@@ -257,7 +272,6 @@ def _second_task(partition: Partition, plan: SecondPlan, services, use_cache: bo
     """Pass 2 of one partition: its values, and its windows when the plan asks; each from the
     cache when its key (and, for values, the bins collected) still holds."""
     keep_freed_memory()
-    folder = partition.path.parent / _CACHE_DIR
     station, label = partition.station, partition.key
     table = None
     cached = computed = 0
@@ -266,18 +280,18 @@ def _second_task(partition: Partition, plan: SecondPlan, services, use_cache: bo
         fkey = (_file_key(partition.path), window)
         if label in plan.redo:
             wkey = _key(fkey, _services_key(services), windows_plan(plan, station, label))
-            hit = _load_cached(folder / "windows.pkl", wkey) if use_cache else None
+            hit = _load_cached(_partition_cache(partition, "windows.pkl"), wkey) if use_cache else None
             if hit is None:
                 table = _read(partition, window)
                 hit = second_windows(table, plan, services, label=label)
                 if use_cache:
-                    _store(folder / "windows.pkl", wkey, hit)
+                    _store(_partition_cache(partition, "windows.pkl"), wkey, hit)
                 computed += 1
             else:
                 cached += 1
             windows[label] = hit
         vkey = _key(fkey)
-        stored = _load_cached(folder / "values.pkl", vkey) if use_cache else None
+        stored = _load_cached(_partition_cache(partition, "values.pkl"), vkey) if use_cache else None
         if stored is not None and covers(stored[0], plan, (station, "")):
             values = stored[1]
             cached += 1
@@ -286,8 +300,9 @@ def _second_task(partition: Partition, plan: SecondPlan, services, use_cache: bo
                 table = _read(partition, window, VALUE_COLUMNS if window is None else None)
             values = second_values(table, plan, station=station)
             if use_cache:
-                bins = {k: b for k, b in plan.targets.items() if k[0] in (station, "")}
-                _store(folder / "values.pkl", vkey, (bins, values))
+                _store(
+                    _partition_cache(partition, "values.pkl"), vkey, (station_targets(plan, station), values)
+                )
             computed += 1
     except (InputError, OSError, pl.exceptions.PolarsError, ValueError) as exc:
         return _Done(None, (_failure(partition, exc),))
@@ -395,8 +410,8 @@ def count_campaign(
     failures: tuple[PartitionFailure, ...] = ()
     n_cached = n_computed = 0
     while True:  # again without a partition that fails in pass 2 (its pass 1 is then cached)
-        failed = {(f.station, f.date) for f in failures}
-        by_station = _by_station([p for p in parts if (p.station, p.date.isoformat()) not in failed])
+        failed = {f.key for f in failures}
+        by_station = _by_station([p for p in parts if p.key not in failed])
         keys = {n: _station_key(ps, services, histogram_bins, time_range) for n, ps in by_station.items()}
         opts = {"cache": cache, "window": time_range, "progress": progress, "dataset": dataset}
         one = _pass_one(runner, by_station, keys, svc, histogram_bins, **opts)
@@ -413,8 +428,8 @@ def count_campaign(
             break
     second: SecondPass = two.partial or SecondPass({}, {})
     counting = finalize(first, second, plan, services, histogram_bins=histogram_bins)
-    order = {(p.station, p.date.isoformat()): i for i, p in enumerate(parts)}
-    failures = tuple(sorted(set(failures), key=lambda f: order[(f.station, f.date)]))
+    order = {p.key: i for i, p in enumerate(parts)}
+    failures = tuple(sorted(set(failures), key=lambda f: order[f.key]))
     positions = {
         name: (float(entry["reference"][0]), float(entry["reference"][1]))
         for name, entry in read_manifest(dataset).get("stations", {}).items()
@@ -448,10 +463,6 @@ def _pass_two(runner, by_station, keys, first, plan, svc, *, cache, window, prog
     by_station = {n: [p for p in ps if p.key in read] for n, ps in by_station.items()}
     by_station = {n: ps for n, ps in by_station.items() if ps}
     shared_plan = runner.share(plan)
-
-    def bins(name: str) -> dict:
-        return {k: b for k, b in plan.targets.items() if k[0] in (name, "")}
-
     return _stations_pass(
         runner,
         by_station,
@@ -464,7 +475,7 @@ def _pass_two(runner, by_station, keys, first, plan, svc, *, cache, window, prog
         _ticks(progress, "pass 2", sum(map(len, by_station.values()))),
         dataset,
         check=lambda name, stored: covers(stored[0], plan, (name, "")),
-        wrap=lambda name, partial: (bins(name), partial),
+        wrap=lambda name, partial: (station_targets(plan, name), partial),
     )
 
 
@@ -481,19 +492,28 @@ def uncached_partitions(
     services = tuple(services)
     n = 0
     for name, ps in _by_station(parts).items():
-        station = Path(dataset) / f"station={name}" / _CACHE_DIR / "pass1.pkl"
-        if _cached_key(station) == _station_key(ps, services, histogram_bins, time_range):
+        whole = _station_key(ps, services, histogram_bins, time_range)
+        if _cached_key(_station_cache(dataset, name, "pass1.pkl")) == whole:
             continue
-        skey = _services_key(services)
         for p in ps:
-            key = _key(_file_key(p.path), skey, histogram_bins, _cut(p, time_range))
-            n += _cached_key(p.path.parent / _CACHE_DIR / "pass1.pkl") != key
+            key = _pass1_key(p, services, histogram_bins, _cut(p, time_range))
+            n += _cached_key(_partition_cache(p, "pass1.pkl")) != key
     return n
 
 
 def _cached_key(path: Path) -> str | None:
     """The key a cache file was stored under (``None``: no readable cache)."""
     return _load_cached(path, None)
+
+
+def _partition_cache(partition: Partition, name: str) -> Path:
+    """The cache file ``name`` of a partition's partials."""
+    return partition.path.parent / _CACHE_DIR / name
+
+
+def _station_cache(dataset: str | Path, station: str, name: str) -> Path:
+    """The cache file ``name`` of a station's merged partials."""
+    return Path(dataset) / f"station={station}" / _CACHE_DIR / name
 
 
 def _by_station(parts: list[Partition]) -> dict[str, list[Partition]]:
@@ -540,11 +560,11 @@ def _stations_pass(
     cached when no partition failed. ``wrap(name, partial)`` is what is stored (the partial when
     ``None``) and ``check(name, stored)`` whether a stored one still holds, its partial being its
     last item. The stations' partials are merged in order."""
-    root = Path(dataset)
     hits, todo = {}, {}
     for name, ps in by_station.items():
-        path = root / f"station={name}" / _CACHE_DIR / cache_name
-        hit = _load_cached(path, station_key(name)) if use_cache else None
+        hit = (
+            _load_cached(_station_cache(dataset, name, cache_name), station_key(name)) if use_cache else None
+        )
         if hit is not None and (check is None or check(name, hit)):
             hits[name] = hit if wrap is None else hit[-1]
             if progress:
@@ -567,7 +587,7 @@ def _stations_pass(
         parts.append(d.partial)
         if use_cache and not d.failures:
             value = d.partial if wrap is None else wrap(name, d.partial)
-            _store(root / f"station={name}" / _CACHE_DIR / cache_name, station_key(name), value)
+            _store(_station_cache(dataset, name, cache_name), station_key(name), value)
     return _Done(merge(*parts) if parts else None, tuple(failures), cached, computed)
 
 

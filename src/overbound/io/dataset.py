@@ -46,6 +46,7 @@ __all__ = [
     "create_dataset",
     "ingest",
     "is_dataset",
+    "partition_key",
     "partition_path",
     "partitions",
     "read_dataset",
@@ -72,7 +73,12 @@ class Partition:
     @property
     def key(self) -> str:
         """``station=ID/date=YYYY-MM-DD`` (the partition's directory, relative to the dataset)."""
-        return f"station={self.station}/date={self.date.isoformat()}"
+        return partition_key(self.station, self.date.isoformat())
+
+
+def partition_key(station: str, date: str) -> str:
+    """The key (directory) of the partition of ``station`` on GPS day ``date`` (ISO 8601)."""
+    return f"station={station}/date={date}"
 
 
 @dataclass(frozen=True)

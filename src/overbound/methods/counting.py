@@ -35,6 +35,7 @@ __all__ = [
     "count_kpis",
     "plot_max",
     "safety_index",
+    "safety_values",
     "stanford_counts",
     "stanford_histogram",
     "stanford_regions",
@@ -318,10 +319,7 @@ def safety_index(pe: np.ndarray, pl_: np.ndarray, time_us: np.ndarray | None = N
     Percentiles use linear interpolation between order statistics (Hyndman & Fan
     type 7, numpy's default).
     """
-    ok = np.isfinite(pe) & np.isfinite(pl_) & (pl_ > 0)
-    si = pe[ok]
-    np.abs(si, out=si)
-    si /= pl_[ok]
+    ok, si = safety_values(pe, pl_)
     keys = [f"p{p:g}" for p in SAFETY_PERCENTILES]
     if si.size == 0:
         return SafetyIndex(0, None, None, dict.fromkeys(keys))
@@ -330,6 +328,16 @@ def safety_index(pe: np.ndarray, pl_: np.ndarray, time_us: np.ndarray | None = N
     when = None if time_us is None else _iso(int(np.asarray(time_us)[_nth_true(ok, imax)]))
     q = np.percentile(si, SAFETY_PERCENTILES, overwrite_input=True)  # si is our own copy
     return SafetyIndex(int(si.size), si_max, when, {k: float(v) for k, v in zip(keys, q, strict=True)})
+
+
+def safety_values(pe: np.ndarray, pl_: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The epochs with a solution and PL > 0 (a mask) and their safety index ``|PE|/PL`` (a new
+    array), in table order."""
+    ok = np.isfinite(pe) & np.isfinite(pl_) & (pl_ > 0)
+    si = pe[ok]
+    np.abs(si, out=si)
+    si /= pl_[ok]
+    return ok, si
 
 
 def _nth_true(mask: np.ndarray, n: int, block: int = 1 << 20) -> int:

@@ -11,12 +11,15 @@ pooled table: counts identical, probabilities and percentiles to the last bit. T
    the first and last epoch, the bin counts of the percentile variables
    (:mod:`overbound.stats.mergeable`) and the per-day counts. Partials merge by
    :func:`merge_first` (associative; order kept, so ties resolve as in one table).
+   Pass 1 also counts the continuity windows that lie inside the partition, and keeps the grid
+   slots at its two ends, on the grid of its own first epoch and interval (a :class:`Guess`).
 2. :func:`plan_second` finds, from the merged first pass, each station's time grid (the
    nominal interval of all its steps, day boundaries included, and its first epoch: the grid
    of :func:`~overbound.stats.dependence.slot_grid` on the whole station) and the bins holding
-   each percentile's order statistics. :func:`second_pass` per partition counts the continuity
-   windows that lie inside it and keeps the grid slots at its two ends, plus the values in the
-   percentile bins; :func:`merge_second` gathers them.
+   each percentile's order statistics. :func:`second_pass` per partition takes the values in
+   those bins, and counts the windows again only where the partition's guess does not hold (its
+   grid differs from its station's, or it shares a slot with the next partition);
+   :func:`merge_second` gathers them.
 3. :func:`finalize` counts the windows that cross partition boundaries from the kept end
    slots (a window that crosses midnight is counted once, with the slots of the next day and
    any gap between), and computes the exact percentiles.
@@ -34,6 +37,7 @@ Choices
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
@@ -56,6 +60,7 @@ from overbound.methods.counting import (
     epoch_arrays,
     histogram_keys,
     no_grid_continuity,
+    safety_values,
     service_kpi,
     stanford_histogram,
     sum_continuity,
@@ -87,6 +92,7 @@ __all__ = [
     "second_pass",
     "second_values",
     "second_windows",
+    "station_targets",
 ]
 
 #: The percentile variables and their percentiles.
@@ -96,7 +102,6 @@ PERCENTILES: dict[str, tuple[float, ...]] = {
     "si_horizontal": SAFETY_PERCENTILES,
     "si_vertical": SAFETY_PERCENTILES,
 }
-_REGION_FIELDS = ("normal", "mi", "hmi", "unavailable", "unavailable_mi", "no_solution")
 _DAY_US = 86_400_000_000
 
 
@@ -181,16 +186,17 @@ class FirstPass:
     histograms: dict[tuple[str, float], tuple[np.ndarray, np.ndarray, int]] = field(default_factory=dict)
 
 
-def _percentile_values(x) -> dict[str, np.ndarray]:
-    """The values of each percentile variable (as :func:`count_kpis` and :func:`safety_index`)."""
+def _percentile_values(x, safety: dict[str, tuple[np.ndarray, np.ndarray]]) -> dict[str, np.ndarray]:
+    """The values of each percentile variable (as :func:`count_kpis` and :func:`safety_index`);
+    ``safety`` is :func:`~overbound.methods.counting.safety_values` of each axis."""
     out = {"hpe": x.pe["horizontal"][x.ok], "vpe": x.pe["vertical"][x.ok]}
     for axis in AXES:
-        pl_ = x.si_pls[axis]
-        ok = np.isfinite(x.pe[axis]) & np.isfinite(pl_) & (pl_ > 0)
-        si = np.abs(x.pe[axis][ok])
-        si /= pl_[ok]
-        out[f"si_{axis}"] = si
+        out[f"si_{axis}"] = safety[axis][1]
     return out
+
+
+def _safety(x) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    return {axis: safety_values(x.pe[axis], x.si_pls[axis]) for axis in AXES}
 
 
 def _station_of(table: pl.DataFrame) -> str:
@@ -216,11 +222,12 @@ def first_pass(
     no_sol = {a: np.isnan(x.pe[a]) | np.isnan(x.pls[a]) for a in AXES}
     above = {a: x.pe[a] > x.pls[a] for a in AXES}
     regions = {
-        k: np.array(astuple_counts(_counts(x.pe[k[0]], x.pls[k[0]], k[1], no_sol[k[0]], above[k[0]])))
+        k: np.array(dataclasses.astuple(_counts(x.pe[k[0]], x.pls[k[0]], k[1], no_sol[k[0]], above[k[0]])))
         for k in keys
         if k[0] != "combined"
     }
-    values = _percentile_values(x)
+    safety = _safety(x)
+    values = _percentile_values(x, safety)
     t = x.time_us
     day = t // _DAY_US
     d0 = int(day[0])
@@ -246,7 +253,7 @@ def first_pass(
         n_available={k: int(np.count_nonzero(m)) for k, m in masks.items()},
         regions=regions,
         si_n={a: int(values[f"si_{a}"].size) for a in AXES},
-        si_max={a: _si_max(x, a, values[f"si_{a}"]) for a in AXES},
+        si_max={a: _si_max(t, *safety[a]) for a in AXES},
         bins={v: bin_counts(values[v]) for v in PERCENTILES},
         days=days,
     )
@@ -261,17 +268,12 @@ def first_pass(
     return FirstPass({_station_of(table): station}, hist)
 
 
-def astuple_counts(c: StanfordCounts) -> tuple[int, ...]:
-    return tuple(getattr(c, f) for f in _REGION_FIELDS)
-
-
-def _si_max(x, axis: str, si: np.ndarray) -> tuple[float, int] | None:
+def _si_max(time_us: np.ndarray, ok: np.ndarray, si: np.ndarray) -> tuple[float, int] | None:
+    """The largest safety index ``si`` of the epochs ``ok`` (the first on a tie) and its epoch."""
     if si.size == 0:
         return None
-    pl_ = x.si_pls[axis]
-    ok = np.flatnonzero(np.isfinite(x.pe[axis]) & np.isfinite(pl_) & (pl_ > 0))
     i = int(np.argmax(si))
-    return float(si[i]), int(x.time_us[ok[i]])
+    return float(si[i]), int(time_us[np.flatnonzero(ok)[i]])
 
 
 def _add_dicts(a: dict, b: dict) -> dict:
@@ -299,7 +301,7 @@ def merge_first(*parts: FirstPass) -> FirstPass:
     for key in dict.fromkeys(k for p in parts for k in p.histograms):
         hs = [p.histograms[key] for p in parts if key in p.histograms]
         merged = merge_counts(*(BinCounts(idx, counts) for idx, counts, _ in hs))
-        hist[key] = (merged.bins.astype(np.int64), merged.counts, sum(h[2] for h in hs))
+        hist[key] = (merged.bins, merged.counts, sum(h[2] for h in hs))
     return FirstPass(stations, hist)
 
 
@@ -315,7 +317,7 @@ def _merge_stations(sts: list[StationFirst]) -> StationFirst:
         spans=[x for s in sts for x in s.spans],
         labels=[x for s in sts for x in s.labels],
         guesses=[x for s in sts for x in s.guesses],
-        steps=(steps.bins.astype(np.int64), steps.counts),
+        steps=(steps.bins, steps.counts),
         n_total=sum(s.n_total for s in sts),
         n_ok=sum(s.n_ok for s in sts),
         n_available=_sum_dicts(s.n_available for s in sts),
@@ -371,7 +373,7 @@ def plan_second(first: FirstPass, services: Sequence[ServiceLevel]) -> SecondPla
         spans = st.spans
         between = np.array([b[0] - a[1] for a, b in itertools.pairwise(spans)], dtype=np.int64)
         steps = merge_counts(BinCounts(*st.steps), BinCounts(*step_counts(between)))
-        dt = interval_from_steps(steps.bins.astype(np.int64), steps.counts)
+        dt = interval_from_steps(steps.bins, steps.counts)
         t0 = spans[0][0]
         grids[name] = None if dt is None else (t0, dt)
         if dt is None:
@@ -454,13 +456,18 @@ def second_values(
     """The partition's values in the percentile target bins of its station and of the network.
     With ``station`` given, the table needs only the error and PL columns (and ``alert``)."""
     name = station if station is not None else _station_of(table)
-    values = _percentile_values(epoch_arrays(table))
+    x = epoch_arrays(table)
+    values = _percentile_values(x, _safety(x))
     return {
-        (scope, var): [values_in_bins(values[var], plan.targets[(scope, var)])]
-        for scope in (name, "")
-        for var in PERCENTILES
-        if (scope, var) in plan.targets
+        (scope, var): [values_in_bins(values[var], bins)]
+        for (scope, var), bins in station_targets(plan, name).items()
     }
+
+
+def station_targets(plan: SecondPlan, station: str) -> dict[tuple[str, str], np.ndarray]:
+    """The target bins :func:`second_values` collects for a partition of ``station``: its
+    station's and the network's."""
+    return {k: b for k, b in plan.targets.items() if k[0] in (station, "")}
 
 
 def windows_plan(plan: SecondPlan, station: str, label: str) -> tuple:

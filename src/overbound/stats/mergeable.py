@@ -45,7 +45,8 @@ _SHIFT = np.uint64(64 - BITS)
 
 @dataclass(frozen=True)
 class BinCounts:
-    """Sparse counts of values per bin: sorted ``bins`` (uint64) and their ``counts`` (int64)."""
+    """Sparse counts of values per bin: sorted ``bins`` (uint64 float-bit bins, or any integer
+    keys) and their ``counts`` (int64)."""
 
     bins: np.ndarray
     counts: np.ndarray
@@ -79,18 +80,20 @@ def bin_counts(x: np.ndarray) -> BinCounts:
 
 
 def _counted(bins: np.ndarray, counts: np.ndarray | None) -> BinCounts:
-    """Distinct ``bins`` (sorted) with their summed ``counts`` (1 each when ``None``).
+    """Distinct ``bins`` (sorted, of the dtype given) with their summed ``counts`` (1 each when
+    ``None``). Any integer keys count this way: float bins here, time steps and flat histogram
+    indices in :mod:`overbound.methods.counting_partitions`.
 
     A dense ``bincount`` over the span of the bins when it is narrow (the usual case: a
     partition's errors span a few octaves, a few tens of thousands of bins), else a sort.
     """
     if bins.size == 0:
-        return BinCounts(np.empty(0, np.uint64), np.empty(0, np.int64))
+        return BinCounts(np.empty(0, bins.dtype), np.empty(0, np.int64))
     lo = bins.min()
     if int(bins.max() - lo) < _DENSE_SPAN:
         dense = np.bincount((bins - lo).astype(np.intp), weights=counts)  # float64: exact below 2**53
         nz = np.flatnonzero(dense)
-        return BinCounts(nz.astype(np.uint64) + lo, dense[nz].astype(np.int64))
+        return BinCounts(nz.astype(bins.dtype) + lo, dense[nz].astype(np.int64))
     uniq, inverse = np.unique(bins, return_inverse=True)
     total = np.bincount(inverse, weights=counts, minlength=uniq.size)
     return BinCounts(uniq, total.astype(np.int64))
