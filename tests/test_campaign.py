@@ -214,3 +214,21 @@ def test_time_window_reads_the_days_it_needs_and_cuts_the_edges(dataset: Path, t
     result = count_campaign(_copy(dataset, tmp_path), SERVICES, time_range=window)
     assert result.n_partitions == 3 * 2  # 2024-01-08 and 2024-01-09 of each station
     assert_same(result.counting, count_kpis(table, SERVICES))
+
+
+def test_counting_only_refuses_to_write_the_pooled_table(dataset: Path, tmp_path: Path) -> None:
+    from click.testing import CliRunner
+
+    from overbound.cli import main
+
+    args = [
+        str(dataset),
+        "-o",
+        str(tmp_path / "out"),
+        "--counting-only",
+        "--epochs",
+        str(tmp_path / "e.parquet"),
+    ]
+    res = CliRunner().invoke(main, ["analyze", *args])
+    assert res.exit_code == 2 and "--counting-only does not read" in res.output
+    assert not (tmp_path / "out").exists() and not (tmp_path / "e.parquet").exists()
