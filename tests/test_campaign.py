@@ -188,6 +188,27 @@ def test_dataset_and_one_file_give_the_same_summary(dataset: Path, tmp_path: Pat
     assert ds_doc["verdicts"] and set(ds_doc["stations"]) == {"SIM01", "SIM02", "SIM03"}
 
 
+def test_verdicts_by_partition_on_a_real_scheduler_equal_one_file(
+    dataset: Path, tmp_path: Path, scheduler
+) -> None:
+    """Without methods the pooled table is never read: the counting and the verdicts' evidence
+    come from the partitions (on two ``dask worker`` processes), equal to the same epochs as one
+    file, and so are the verdicts."""
+    from overbound.io.table import write_epochs
+
+    table, _ = read_dataset(dataset)
+    one = tmp_path / "network.parquet"
+    write_epochs(table, one)
+    ds = _copy(dataset, tmp_path)
+    common = ["--no-confidence", "--no-evt", "--no-parametric"]
+    file_doc = _analyze([str(one), "-o", str(tmp_path / "file"), *common])
+    ds_doc = _analyze([str(ds), "-o", str(tmp_path / "dataset"), "--scheduler", scheduler, *common])
+    ds_doc.pop("network")
+    assert _numbers(file_doc) == _numbers(ds_doc)
+    assert file_doc["verdicts"] == ds_doc["verdicts"] and ds_doc["verdicts"]["LPV"]
+    assert file_doc["verdicts_by_station"] == ds_doc["verdicts_by_station"]
+
+
 def test_counting_only_on_a_real_scheduler_equals_in_process(
     dataset: Path, tmp_path: Path, scheduler
 ) -> None:

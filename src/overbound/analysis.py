@@ -174,9 +174,9 @@ def analyze(
     A campaign dataset (one input, a directory of :mod:`overbound.io.dataset`) is counted
     partition by partition (:func:`~overbound.campaign.count_campaign` on ``client``, a
     ``distributed.Client``, or in this process when ``None``; partials cached unless
-    ``cache=False``): the same counting as of its pooled table, in memory bounded by a partition.
-    The methods and the verdicts' evidence still read the pooled table; with ``counting_only`` they
-    are not run and the table is not read (no verdicts: ``evidence`` is ``None``).
+    ``cache=False``): the same counting and verdicts' evidence as of its pooled table, in memory
+    bounded by a partition. The methods still read the pooled table: with none asked (or with
+    ``counting_only``, which also skips the evidence: no verdicts) it is not read.
     """
     methods = _Methods(confidence, evt, evt_n_boot, evt_seed, parametric)
     if _is_campaign(inputs, format):
@@ -230,6 +230,17 @@ class _Methods:
     evt_seed: int
     parametric: bool
 
+    @property
+    def none(self) -> bool:
+        """No method asked: the counting and its evidence only."""
+        return (
+            self.confidence is not None
+            and not self.confidence
+            and self.evt is not None
+            and not self.evt
+            and not self.parametric
+        )
+
 
 def _with_methods(
     table: pl.DataFrame,
@@ -240,9 +251,12 @@ def _with_methods(
     methods: _Methods,
     progress: Callable[[str], None] | None,
     network: CampaignCounting | None = None,
+    evidence: Evidence | None = None,
 ) -> Analysis:
-    """The analysis of ``table`` with its ``counting`` done: the evidence and the methods asked."""
-    evidence = counted_evidence(table, counting, levels)
+    """The analysis of ``table`` with its ``counting`` done: the evidence (unless given) and the
+    methods asked."""
+    if evidence is None:
+        evidence = counted_evidence(table, counting, levels)
     confidence, evt, parametric = methods.confidence, methods.evt, methods.parametric
     axes = _confidence_axes(table) if confidence is None else tuple(confidence)
     if axes and progress:
@@ -295,15 +309,26 @@ def _analyze_campaign(
             progress(f"counting KPIs, {stage}: {done}/{total} station-days")
 
     network = count_campaign(
-        dataset, levels, client=client, cache=cache, time_range=time_range, progress=tick
+        dataset,
+        levels,
+        client=client,
+        cache=cache,
+        time_range=time_range,
+        evidence=not counting_only,
+        progress=tick,
     )
     report = _campaign_report(dataset, network)
     label = title or dataset.name
-    if counting_only:
-        return Analysis(pl.DataFrame(), (report,), levels, network.counting, label, network=network)
+    if counting_only or methods.none:  # nothing reads the pooled table
+        empty = pl.DataFrame()
+        return Analysis(
+            empty, (report,), levels, network.counting, label, evidence=network.evidence, network=network
+        )
     table, _ = read_dataset(dataset, columns=columns, skip={f.key for f in network.failures})
     table = validate_epochs(table if time_range is None else filter_time(table, time_range), str(dataset))
-    return _with_methods(table, (report,), levels, network.counting, label, methods, progress, network)
+    return _with_methods(
+        table, (report,), levels, network.counting, label, methods, progress, network, network.evidence
+    )
 
 
 def _campaign_report(dataset: Path, network: CampaignCounting) -> ReadReport:

@@ -55,18 +55,23 @@ from overbound.methods.counting_partitions import (
     FirstPass,
     SecondPass,
     SecondPlan,
+    bounds_plan,
     covers,
     daily_availability,
+    evidence_inputs,
     finalize,
+    finish_evidence,
     first_pass,
     merge_first,
     merge_second,
+    part_of,
     plan_second,
     second_values,
     second_windows,
     station_targets,
     windows_plan,
 )
+from overbound.methods.evidence import Evidence, EvidencePart, draft_evidence
 from overbound.services import ServiceLevel
 
 __all__ = [
@@ -116,6 +121,9 @@ class CampaignCounting:
     n_cached : partial results taken from the cache (pass 1, windows and values each count).
     n_computed : partial results computed.
     positions : ``(lat, lon)`` (deg) of the stations whose reference the manifest holds.
+    evidence : the counted evidence of the verdicts
+        (:func:`~overbound.methods.evidence.counted_evidence` of the pooled table), by partition;
+        ``None`` when not asked for.
     """
 
     counting: CountingResult
@@ -125,6 +133,7 @@ class CampaignCounting:
     n_cached: int
     n_computed: int
     positions: dict[str, tuple[float, float]] = dataclasses.field(default_factory=dict)
+    evidence: Evidence | None = None
 
 
 # --------------------------------------------------------------------------------------------------
@@ -290,23 +299,68 @@ def _second_task(partition: Partition, plan: SecondPlan, services, use_cache: bo
             else:
                 cached += 1
             windows[label] = hit
-        vkey = _key(fkey)
-        stored = _load_cached(_partition_cache(partition, "values.pkl"), vkey) if use_cache else None
-        if stored is not None and covers(stored[0], plan, (station, "")):
-            values = stored[1]
-            cached += 1
-        else:
-            if table is None:  # the values need neither times nor station (unless cut by a window)
-                table = _read(partition, window, VALUE_COLUMNS if window is None else None)
-            values = second_values(table, plan, station=station)
-            if use_cache:
-                _store(
-                    _partition_cache(partition, "values.pkl"), vkey, (station_targets(plan, station), values)
-                )
-            computed += 1
+        values, hit = _values(partition, plan, use_cache, window, "values.pkl", table)
+        cached, computed = cached + hit, computed + (not hit)
     except (InputError, OSError, pl.exceptions.PolarsError, ValueError) as exc:
         return _Done(None, (_failure(partition, exc),))
     return _Done(SecondPass(windows, values), cached=cached, computed=computed)
+
+
+def _values(
+    partition: Partition, plan: SecondPlan, use_cache: bool, window: Window, name: str, table=None
+) -> tuple[dict, bool]:
+    """A partition's values in the plan's target bins (:func:`second_values`), and whether they
+    came from its cache ``name``: stored values hold while their bins cover the plan's rank bins."""
+    station = partition.station
+    key = _key(_file_key(partition.path), window)
+    stored = _load_cached(_partition_cache(partition, name), key) if use_cache else None
+    if stored is not None and covers(stored[0], plan, (station, "")):
+        return stored[1], True
+    if table is None:  # the values need neither times nor station (unless cut by a window)
+        table = _read(partition, window, VALUE_COLUMNS if window is None else None)
+    values = second_values(table, plan, station=station)
+    if use_cache:
+        _store(_partition_cache(partition, name), key, (station_targets(plan, station), values))
+    return values, False
+
+
+def _bounds_task(partition: Partition, plan: SecondPlan, use_cache: bool, window: Window) -> _Done:
+    """The values the evidence's quantile bounds need (:func:`quantile_plan`) of one partition."""
+    keep_freed_memory()
+    try:
+        values, hit = _values(partition, plan, use_cache, window, "bounds.pkl")
+    except (InputError, OSError, pl.exceptions.PolarsError, ValueError) as exc:
+        return _Done(None, (_failure(partition, exc),))
+    return _Done(SecondPass({}, values), cached=int(hit), computed=int(not hit))
+
+
+def _evidence_task(
+    partition: Partition, services, station: tuple, gap_s: float, use_cache: bool, window: Window
+) -> _Done:
+    """The :class:`~overbound.methods.evidence.EvidencePart` of one partition, ``station`` being
+    its station's nominal interval (s) and 95th percentiles per axis."""
+    keep_freed_memory()
+    cache = _partition_cache(partition, "evidence.pkl")
+    try:
+        key = _key(_file_key(partition.path), window, _services_key(services), station, gap_s)
+        if use_cache and (hit := _load_cached(cache, key)) is not None:
+            return _Done(hit, cached=1)
+        table = _read(partition, window)
+        value = {} if table.is_empty() else {partition.station: [part_of(table, services, station, gap_s)]}
+    except (InputError, OSError, pl.exceptions.PolarsError, ValueError) as exc:
+        return _Done(None, (_failure(partition, exc),))
+    if use_cache:
+        _store(cache, key, value)
+    return _Done(value, computed=1)
+
+
+def merge_evidence_parts(*parts: dict[str, list[EvidencePart]]) -> dict[str, list[EvidencePart]]:
+    """Evidence parts of consecutive partitions, per station in time order."""
+    out: dict[str, list[EvidencePart]] = {}
+    for p in parts:
+        for name, pieces in p.items():
+            out.setdefault(name, []).extend(pieces)
+    return out
 
 
 def _merge_done(merge: Callable, *parts: _Done) -> _Done:
@@ -386,14 +440,16 @@ def count_campaign(
     cache: bool = True,
     histogram_bins: int = 200,
     time_range: Window = None,
+    evidence: bool = False,
     progress: Callable[[str, int, int], None] | None = None,
 ) -> CampaignCounting:
     """The counting KPIs of every partition of ``dataset``, merged (see the module notes).
 
     ``client``: a ``distributed.Client`` (:func:`campaign_client`), or ``None`` to run in this
     process. ``time_range``: ``(start, stop)`` GPS times (naive, ``None`` for open), the epochs
-    ``start <= time < stop`` only; days outside are not read. ``progress(stage, done, total)`` is
-    called as partitions are done.
+    ``start <= time < stop`` only; days outside are not read. ``evidence``: also the counted
+    evidence of the verdicts (two more passes: the evidence parts, then the values of its
+    quantile bounds). ``progress(stage, done, total)`` is called as partitions are done.
 
     Raises
     ------
@@ -406,38 +462,99 @@ def count_campaign(
         raise InputError(str(dataset), f"the dataset has no partition {what}")
     runner = _Local() if client is None else _Dask(client)
     services = tuple(services)
-    svc = runner.share(services)
-    failures: tuple[PartitionFailure, ...] = ()
-    n_cached = n_computed = 0
-    while True:  # again without a partition that fails in pass 2 (its pass 1 is then cached)
-        failed = {f.key for f in failures}
-        by_station = _by_station([p for p in parts if p.key not in failed])
-        keys = {n: _station_key(ps, services, histogram_bins, time_range) for n, ps in by_station.items()}
-        opts = {"cache": cache, "window": time_range, "progress": progress, "dataset": dataset}
-        one = _pass_one(runner, by_station, keys, svc, histogram_bins, **opts)
-        first: FirstPass | None = one.partial
-        if first is None or not first.stations:
-            why = "; ".join(f"{f.station} {f.date}: {f.reason}" for f in (failures + one.failures)[:3])
-            raise InputError(str(dataset), f"no partition could be read ({why})")
-        plan = plan_second(first, services)
-        two = _pass_two(runner, by_station, keys, first, plan, svc, **opts)
-        failures += one.failures + two.failures
-        n_cached += one.cached + two.cached
-        n_computed += one.computed + two.computed
-        if not two.failures:
+    run = _Run(runner, dataset, services, runner.share(services), cache, histogram_bins, time_range, progress)
+    while True:  # again without a partition that fails after pass 1 (its pass 1 is then cached)
+        failed = {f.key for f in run.failures}
+        result = run.passes(_by_station([p for p in parts if p.key not in failed]), evidence)
+        if result is not None:
             break
-    second: SecondPass = two.partial or SecondPass({}, {})
-    counting = finalize(first, second, plan, services, histogram_bins=histogram_bins)
+    first, counting, found = result
     order = {p.key: i for i, p in enumerate(parts)}
-    failures = tuple(sorted(set(failures), key=lambda f: order[f.key]))
+    failures = tuple(sorted(set(run.failures), key=lambda f: order[f.key]))
     positions = {
         name: (float(entry["reference"][0]), float(entry["reference"][1]))
         for name, entry in read_manifest(dataset).get("stations", {}).items()
         if name in counting.stations and entry.get("reference")
     }
     return CampaignCounting(
-        counting, daily_availability(first, services), failures, len(parts), n_cached, n_computed, positions
+        counting,
+        daily_availability(first, services),
+        failures,
+        len(parts),
+        run.n_cached,
+        run.n_computed,
+        positions,
+        found,
     )
+
+
+@dataclass
+class _Run:
+    """One :func:`count_campaign`: its options, and the failures and cache use of its passes."""
+
+    runner: object
+    dataset: str | Path
+    services: tuple[ServiceLevel, ...]
+    shared_services: object
+    cache: bool
+    bins: int
+    window: Window
+    progress: Callable | None
+    failures: tuple[PartitionFailure, ...] = ()
+    n_cached: int = 0
+    n_computed: int = 0
+
+    def done(self, d: _Done) -> bool:
+        """Count a pass's outcome; whether no partition failed in it."""
+        self.failures += d.failures
+        self.n_cached += d.cached
+        self.n_computed += d.computed
+        return not d.failures
+
+    def passes(self, by_station: dict[str, list[Partition]], evidence: bool):
+        """Every pass over the partitions ``by_station``: ``(first, counting, evidence)``, or
+        ``None`` when a partition failed after pass 1 (run again without it)."""
+        keys = {n: _station_key(ps, self.services, self.bins, self.window) for n, ps in by_station.items()}
+        opts = {
+            "cache": self.cache,
+            "window": self.window,
+            "progress": self.progress,
+            "dataset": self.dataset,
+        }
+        one = _pass_one(self.runner, by_station, keys, self.shared_services, self.bins, **opts)
+        self.done(one)
+        first: FirstPass | None = one.partial
+        if first is None or not first.stations:
+            why = "; ".join(f"{f.station} {f.date}: {f.reason}" for f in self.failures[:3])
+            raise InputError(str(self.dataset), f"no partition could be read ({why})")
+        plan = plan_second(first, self.services)
+        read = {label for st in first.stations.values() for label in st.labels}  # not failed, not empty
+        by_station = {n: [p for p in ps if p.key in read] for n, ps in by_station.items()}
+        by_station = {n: ps for n, ps in by_station.items() if ps}
+        two = _pass_two(self.runner, by_station, keys, first, plan, self.shared_services, **opts)
+        if not self.done(two):
+            return None
+        second: SecondPass = two.partial or SecondPass({}, {})
+        counting = finalize(first, second, plan, self.services, histogram_bins=self.bins)
+        if not evidence:
+            return first, counting, None
+        found = self._evidence(by_station, keys, first, plan, counting, opts)
+        return None if found is None else (first, counting, found)
+
+    def _evidence(self, by_station, keys, first, plan, counting, opts) -> Evidence | None:
+        """The counted evidence (pass 3, the evidence parts; pass 4, the values of its quantile
+        bounds), or ``None`` when a partition failed."""
+        stations = evidence_inputs(plan, counting)
+        three = _pass_evidence(self.runner, by_station, keys, stations, self.shared_services, **opts)
+        if not self.done(three):
+            return None
+        pieces = three.partial or {}
+        draft = draft_evidence(pieces, {n: stations[n][0] for n in pieces}, counting, self.services)
+        qplan, levels = bounds_plan(first, draft)
+        four = _pass_bounds(self.runner, by_station, keys, qplan, **opts)
+        if not self.done(four):
+            return None
+        return finish_evidence(first, draft, qplan, levels, four.partial or SecondPass({}, {}))
 
 
 def _pass_one(runner, by_station, keys, svc, bins, *, cache, window, progress, dataset) -> _Done:
@@ -457,11 +574,8 @@ def _pass_one(runner, by_station, keys, svc, bins, *, cache, window, progress, d
 
 
 def _pass_two(runner, by_station, keys, first, plan, svc, *, cache, window, progress, dataset) -> _Done:
-    """Pass 2 of every station read in pass 1; a station's cached values hold while they cover
+    """Pass 2 of the partitions read in pass 1; a station's cached values hold while they cover
     the plan's rank bins."""
-    read = {label for st in first.stations.values() for label in st.labels}  # not failed, not empty
-    by_station = {n: [p for p in ps if p.key in read] for n, ps in by_station.items()}
-    by_station = {n: ps for n, ps in by_station.items() if ps}
     shared_plan = runner.share(plan)
     return _stations_pass(
         runner,
@@ -473,6 +587,43 @@ def _pass_two(runner, by_station, keys, first, plan, svc, *, cache, window, prog
         merge_second,
         cache,
         _ticks(progress, "pass 2", sum(map(len, by_station.values()))),
+        dataset,
+        check=lambda name, stored: covers(stored[0], plan, (name, "")),
+        wrap=lambda name, partial: (station_targets(plan, name), partial),
+    )
+
+
+def _pass_evidence(runner, by_station, keys, stations, svc, *, cache, window, progress, dataset) -> _Done:
+    """Pass 3: the evidence parts of every partition (``stations``: per station its interval and
+    95th percentiles, which the parts depend on)."""
+    return _stations_pass(
+        runner,
+        by_station,
+        "evidence.pkl",
+        lambda name: _key(keys[name], stations[name]),
+        lambda name, ps: [(p, svc, stations[name], 360.0, cache, _cut(p, window)) for p in ps],
+        _evidence_task,
+        merge_evidence_parts,
+        cache,
+        _ticks(progress, "evidence", sum(map(len, by_station.values()))),
+        dataset,
+    )
+
+
+def _pass_bounds(runner, by_station, keys, plan, *, cache, window, progress, dataset) -> _Done:
+    """Pass 4: the values of the evidence's quantile bounds; a station's stored values hold while
+    they cover the plan's rank bins."""
+    shared_plan = runner.share(plan)
+    return _stations_pass(
+        runner,
+        by_station,
+        "bounds.pkl",
+        keys.__getitem__,
+        lambda name, ps: [(p, shared_plan, cache, _cut(p, window)) for p in ps],
+        _bounds_task,
+        merge_second,
+        cache,
+        _ticks(progress, "evidence bounds", sum(map(len, by_station.values()))),
         dataset,
         check=lambda name, stored: covers(stored[0], plan, (name, "")),
         wrap=lambda name, partial: (station_targets(plan, name), partial),

@@ -10,7 +10,8 @@ import polars as pl
 import pytest
 
 from overbound.methods.counting import count_kpis
-from overbound.methods.counting_partitions import count_partitioned, daily_availability
+from overbound.methods.counting_partitions import count_partitioned, daily_availability, evidence_partitioned
+from overbound.methods.evidence import counted_evidence
 from overbound.services import resolve_services
 from overbound.simulate import SimulationConfig, simulate
 
@@ -44,10 +45,14 @@ def station_days(table: pl.DataFrame) -> list[pl.DataFrame]:
 
 
 def check(table: pl.DataFrame):
+    """The counting and the verdicts' evidence by partition equal those of the pooled table."""
     pooled = count_kpis(table, SERVICES)
-    parts = station_days(table)
-    merged, first = count_partitioned([lambda p=p: p for p in parts], SERVICES)
+    parts = [lambda p=p: p for p in station_days(table)]
+    merged, first = count_partitioned(parts, SERVICES)
     assert_same(merged, pooled)
+    assert_same(
+        evidence_partitioned(parts, SERVICES, first, merged), counted_evidence(table, pooled, SERVICES)
+    )
     return pooled, first
 
 
@@ -126,8 +131,11 @@ def test_day_boundary_edge_cases(seed):
 
 def test_single_partition_equals_count_kpis():
     table = simulate(SimulationConfig(days=0.5, interval_s=1.0, seed=1)).table
-    merged, _ = count_partitioned([lambda: table], SERVICES)
-    assert_same(merged, count_kpis(table, SERVICES))
+    merged, first = count_partitioned([lambda: table], SERVICES)
+    pooled = count_kpis(table, SERVICES)
+    assert_same(merged, pooled)
+    ev = evidence_partitioned([lambda: table], SERVICES, first, merged)
+    assert_same(ev, counted_evidence(table, pooled, SERVICES))
 
 
 def test_percentiles_bit_exact_on_ties():
@@ -149,3 +157,12 @@ def test_daily_availability_dates():
     assert daily["date"].to_list() == [dt.date(2024, 1, 7), dt.date(2024, 1, 8)]
     lpv = [(p["vpl"] < 50) & (p["hpl"] < 40) for p in station_days(table)]
     assert daily["LPV"].to_list() == [float(m.mean()) for m in lpv]
+
+
+def test_evidence_of_a_long_station_by_partition():
+    """A station over 2**18 epochs: the effective sizes come from block means whose blocks cross
+    the midnights; the evidence by partition is still that of the pooled table."""
+    cfg = SimulationConfig(days=3.5, interval_s=1.0, seed=4, gap_rate_per_day=2.0, gap_mean_s=300)
+    table = simulate(cfg).table
+    assert table.height > 2**18
+    check(table)

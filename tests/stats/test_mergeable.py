@@ -78,3 +78,15 @@ def test_values_in_bins_equals_the_bin_test_of_every_value():
             wanted = distinct[i : j + 1 : max(1, (j - i) // 3)]
             got, ref = np.sort(values_in_bins(x, wanted)), np.sort(x[np.isin(codes, wanted)])
             assert np.array_equal(got, ref) and np.array_equal(np.signbit(got), np.signbit(ref))
+
+
+def test_exact_quantile_equals_numpy_quantile():
+    """``scale=1``: numpy's quantile (no division by 100) from the values of the rank bins."""
+    rng = np.random.default_rng(11)
+    for n in (1, 2, 7, 1000, 20_001):
+        x = np.round(rng.lognormal(0, 2, n), 3)  # ties
+        counts = bin_counts(x)
+        for q in (0.0, 1e-6, 0.3, 0.9499999, 0.95, 0.9500001, 1.0 - 1e-9, 1.0):
+            bins, below = rank_bins(counts, q, scale=1)
+            got = exact_percentile(n, q, below, values_in_bins(x, bins), scale=1)
+            assert got == np.quantile(x, q), (n, q)

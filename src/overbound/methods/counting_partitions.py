@@ -39,7 +39,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -66,6 +66,7 @@ from overbound.methods.counting import (
     sum_continuity,
     window_slots,
 )
+from overbound.methods.evidence import Evidence, EvidenceDraft, EvidencePart, draft_evidence, evidence_part
 from overbound.services import ServiceLevel
 from overbound.stats.dependence import interval_from_steps, prefix_counts, step_counts
 from overbound.stats.mergeable import (
@@ -425,6 +426,36 @@ def covers(collected: dict, plan: SecondPlan, scopes: Iterable[str]) -> bool:
     return True
 
 
+def quantile_plan(first: FirstPass, levels: Mapping[tuple[str, str], Sequence[float]]) -> SecondPlan:
+    """A plan whose :func:`second_values` collect what the quantiles ``levels`` (0-1, as
+    ``numpy.quantile``) of each ``(scope, variable)`` need (the bounds of the verdicts' evidence:
+    levels known only once the counting is done)."""
+    scopes = _scopes(first)
+    targets, below = {}, {}
+    for (scope, var), qs in levels.items():
+        bins = scopes[scope][var]
+        found = []
+        for q in qs:
+            b, n_below = rank_bins(bins, q, scale=1)
+            found.append(b)
+            below[(scope, var, q)] = (b, n_below)
+        targets[(scope, var)] = _widened(bins.bins, np.concatenate(found))
+    return SecondPlan({}, {}, frozenset(), frozenset(), targets, below)
+
+
+def exact_quantiles(
+    first: FirstPass, plan: SecondPlan, values: SecondPass, levels: Mapping[tuple[str, str], Sequence[float]]
+) -> dict[tuple[str, str], list[float]]:
+    """``numpy.quantile`` of the pooled values of each ``(scope, variable)`` at its ``levels``,
+    from the values collected for :func:`quantile_plan`."""
+    scopes, memo = _scopes(first), {}
+    out = {}
+    for (scope, var), qs in levels.items():
+        n = scopes[scope][var].n
+        out[(scope, var)] = [_percentile(plan, values, memo, n, scope, var, q, scale=1) for q in qs]
+    return out
+
+
 def _slot(t: np.ndarray | int, t0: int, dt: int):
     """The nearest grid slot (as :func:`~overbound.stats.dependence.slot_grid`)."""
     return (t - (t0 - dt // 2)) // dt
@@ -623,12 +654,19 @@ def _station_continuity(sw: _StationWindows, grid, key: tuple, window_s: float):
 
 
 def _percentile(
-    plan: SecondPlan, second: SecondPass, memo: dict, n: int, scope: str, var: str, q: float
+    plan: SecondPlan,
+    second: SecondPass,
+    memo: dict,
+    n: int,
+    scope: str,
+    var: str,
+    q: float,
+    scale: float = 100.0,
 ) -> float:
     bins, below = plan.below[(scope, var, q)]
     if (scope, var) not in memo:
         memo[(scope, var)] = np.concatenate(second.values.get((scope, var), [np.empty(0)]))
-    return exact_percentile(n, q, below, values_in_bins(memo[(scope, var)], bins))
+    return exact_percentile(n, q, below, values_in_bins(memo[(scope, var)], bins), scale=scale)
 
 
 def _result(
@@ -766,3 +804,68 @@ def count_partitioned(
         *(second_pass(load(), plan, services, label=str(i)) for i, load in enumerate(partitions))
     )
     return finalize(first, second, plan, services, histogram_bins=histogram_bins), first
+
+
+# --------------------------------------------------------------------------------------------------
+# the counted evidence of the verdicts: pass 3 (the evidence parts), pass 4 (the values of its
+# quantile bounds), the same as :func:`~overbound.methods.evidence.counted_evidence` of the table
+
+#: The percentile variable of each axis's error (the evidence's accuracy bounds).
+ERROR_VARIABLE = {"horizontal": "hpe", "vertical": "vpe"}
+
+
+def evidence_inputs(plan: SecondPlan, counting: CountingResult) -> dict[str, tuple]:
+    """Per station what its evidence parts depend on: ``(interval_s, ((axis, q95), ...))``, its
+    nominal interval and the 95th percentiles of its errors."""
+    out = {}
+    for name, grid in plan.grids.items():
+        c = counting.by_station.get(name, counting)
+        q95 = tuple((a, c.hpe95 if a == "horizontal" else c.vpe95) for a in AXES)
+        out[name] = (None if grid is None else grid[1] / 1e6, q95)
+    return out
+
+
+def part_of(
+    table: pl.DataFrame, services: Sequence[ServiceLevel], station: tuple, gap_s: float
+) -> EvidencePart:
+    """Pass 3 on one partition: its evidence part (``station`` from :func:`evidence_inputs`)."""
+    interval_s, q95 = station
+    return evidence_part(epoch_arrays(table), services, interval_s, dict(q95), gap_s)
+
+
+def bounds_plan(first: FirstPass, draft: EvidenceDraft) -> tuple[SecondPlan, dict]:
+    """The plan of pass 4 (:func:`quantile_plan`) and the quantile levels it collects."""
+    levels = {(scope, ERROR_VARIABLE[a]): lv for (scope, a), lv in draft.levels().items()}
+    return quantile_plan(first, levels), levels
+
+
+def finish_evidence(
+    first: FirstPass, draft: EvidenceDraft, plan: SecondPlan, levels: dict, values: SecondPass
+):
+    """The evidence, from the values pass 4 collected for :func:`bounds_plan`."""
+    found = exact_quantiles(first, plan, values, levels)
+    return draft.evidence({(scope, a): found[(scope, ERROR_VARIABLE[a])] for scope, a in draft.levels()})
+
+
+def evidence_partitioned(
+    partitions: Sequence[Callable[[], pl.DataFrame]],
+    services: Sequence[ServiceLevel],
+    first: FirstPass,
+    counting: CountingResult,
+    *,
+    gap_s: float = 360.0,
+) -> Evidence:
+    """:func:`~overbound.methods.evidence.counted_evidence` of the pooled table, from the same
+    ``partitions`` as :func:`count_partitioned` (its merged pass 1 and result): passes 3 and 4 in
+    this process."""
+    inputs = evidence_inputs(plan_second(first, services), counting)
+    pieces: dict[str, list[EvidencePart]] = {}
+    for load in partitions:
+        table = load()
+        if not table.is_empty():
+            name = _station_of(table)
+            pieces.setdefault(name, []).append(part_of(table, services, inputs[name], gap_s))
+    draft = draft_evidence(pieces, {n: inputs[n][0] for n in pieces}, counting, services, gap_s=gap_s)
+    plan, levels = bounds_plan(first, draft)
+    values = [second_values(t, plan) for load in partitions if not (t := load()).is_empty()]
+    return finish_evidence(first, draft, plan, levels, merge_second(*(SecondPass({}, v) for v in values)))

@@ -27,15 +27,22 @@ much of the geometry); the per-station evidence is kept next to the pooled one f
 
 from __future__ import annotations
 
+import itertools
 import math
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 import polars as pl
 
-from overbound.io.schema import as_numpy
-from overbound.methods.counting import CountingResult, _station_slices
+from overbound.io.schema import InputError
+from overbound.methods.counting import (
+    CountingResult,
+    EpochArrays,
+    _station_slices,
+    epoch_arrays,
+    safety_values,
+)
 from overbound.services import ServiceLevel
 from overbound.stats.dependence import nominal_interval_us
 from overbound.stats.proportion import Bounds, clopper_pearson, integrated_autocorrelation
@@ -47,9 +54,13 @@ __all__ = [
     "CountedEvents",
     "CountedQuantile",
     "Evidence",
+    "EvidenceDraft",
+    "EvidencePart",
     "StationEvidence",
     "TailCounts",
     "counted_evidence",
+    "draft_evidence",
+    "evidence_part",
 ]
 
 #: Safety-index levels at which the tail models' predictions are checked against the counts.
@@ -219,86 +230,263 @@ def quantile_bounds(
 
 
 # --------------------------------------------------------------------------------------------------
-# the table
+# partial results: what one piece of a station's epochs (the station, or one of its partitions)
+# contributes; pieces of a station join in time order, exactly as the station's table
 
 
 @dataclass(frozen=True, slots=True)
-class _Arrays:
-    """Views of one station's columns (copies only where a value changes: |VPE|, alerted PLs)."""
+class Runs:
+    """Sorted event times (µs) reduced for runs declustering: ``n`` events from ``first`` to
+    ``last``, ``breaks`` of the consecutive ones more than the gap apart. Consecutive pieces join
+    (:meth:`then`) as :func:`run_clusters` of their times together."""
 
-    t_us: np.ndarray
-    pe: dict[str, np.ndarray]
-    pl: dict[str, np.ndarray]  # alerted epochs: inf
-    alert: np.ndarray | None
-    solution: np.ndarray
-    interval_s: float | None
+    n: int
+    first: int
+    last: int
+    breaks: int
 
-    def si(self, axis: str) -> np.ndarray:
-        """Safety index PE/PL; NaN without a solution, with PL <= 0 or alerted."""
-        pe, pl_ = self.pe[axis], self.pl[axis]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = pe / pl_
-        bad = ~(np.isfinite(pe) & (pl_ > 0) & np.isfinite(pl_))
-        if self.alert is not None:
-            bad |= self.alert
-        s[bad] = np.nan
-        return s
+    @property
+    def clusters(self) -> int:
+        return self.breaks + 1 if self.n else 0
 
-
-def _arrays(table: pl.DataFrame, rows) -> _Arrays:
-    t_us = as_numpy(table["time"])[rows]
-    pe = {"horizontal": as_numpy(table["hpe"])[rows], "vertical": np.abs(as_numpy(table["vpe"])[rows])}
-    pls = {"horizontal": as_numpy(table["hpl"])[rows], "vertical": as_numpy(table["vpl"])[rows]}
-    alert = None
-    if "alert" in table.columns and table["alert"].any():
-        alert = as_numpy(table["alert"].fill_null(False))[rows]
-        pls = {a: np.where(alert & ~np.isnan(x), np.inf, x) for a, x in pls.items()}
-    # as in count_kpis: an alerted epoch (PL infinite) has no solution
-    solution = np.isfinite(pe["horizontal"]) & np.isfinite(pls["horizontal"])
-    solution &= np.isfinite(pe["vertical"]) & np.isfinite(pls["vertical"])
-    step = nominal_interval_us(t_us)
-    return _Arrays(t_us, pe, pls, alert, solution, None if step is None else step / 1e6)
+    def then(self, later: Runs, gap_s: float) -> Runs:
+        """These runs followed by ``later`` (all of whose times come after)."""
+        if not later.n or not self.n:
+            return later if self.n == 0 else self
+        apart = later.first / 1e6 - self.last / 1e6 > gap_s  # as np.diff of the times in seconds
+        return Runs(self.n + later.n, self.first, later.last, self.breaks + later.breaks + int(apart))
 
 
-def _tail_counts(d: _Arrays, axis: str, gap_s: float) -> TailCounts:
-    si = d.si(axis)
-    ok = ~np.isnan(si)
-    n = int(np.count_nonzero(ok))
-    epochs, clusters = [], []
-    for level in SI_LEVELS:  # three levels
-        above = si > level  # NaN compares False
-        epochs.append(int(np.count_nonzero(above)))
-        clusters.append(run_clusters(d.t_us[above] / 1e6, gap_s))
-    if n:
-        mx = float(np.fmax.reduce(si))  # NaN-skipping maximum without nanargmax's copy
-        i = int(np.argmax(si == mx))
-        tmax = _iso(d.t_us[i] / 1e6)
-    else:
-        mx, tmax = None, None
-    return TailCounts(axis, SI_LEVELS, n, tuple(epochs), tuple(clusters), mx, tmax, gap_s)
+_NO_RUNS = Runs(0, 0, 0, 0)
+
+
+def runs(t_us: np.ndarray, gap_s: float) -> Runs:
+    """:class:`Runs` of the sorted event times ``t_us``."""
+    if t_us.size == 0:
+        return _NO_RUNS
+    return Runs(int(t_us.size), int(t_us[0]), int(t_us[-1]), run_clusters(t_us / 1e6, gap_s) - 1)
+
+
+@dataclass(frozen=True, slots=True)
+class Flags:
+    """A 0/1 series, 8 values per byte (a station-year at 1 Hz: 4 MB)."""
+
+    bits: np.ndarray
+    n: int
+
+    @classmethod
+    def of(cls, flags: np.ndarray) -> Flags:
+        return cls(np.packbits(flags), int(flags.size))
+
+    @staticmethod
+    def joined(pieces: Sequence[Flags]) -> np.ndarray:
+        """The pieces' series one after the other, as booleans."""
+        out = [np.unpackbits(p.bits, count=p.n).view(np.bool_) for p in pieces]
+        return np.concatenate(out) if out else np.zeros(0, np.bool_)
+
+
+@dataclass(frozen=True, slots=True)
+class _Loss:
+    """One availability mask of a piece: its flags, the losses between its own epochs, and
+    whether its first and last epochs are available (a loss may fall on the join)."""
+
+    flags: Flags
+    losses: Runs
+    first_up: bool
+    last_up: bool
+
+
+@dataclass(frozen=True, slots=True)
+class _Tail:
+    """The safety index of one axis in a piece: epochs with one, runs above each of
+    :data:`SI_LEVELS`, and the largest with its time (the first on a tie)."""
+
+    n: int
+    above: tuple[Runs, ...]
+    max: tuple[float, int] | None
+
+
+@dataclass(frozen=True, slots=True)
+class EvidencePart:
+    """What one piece of a station's epochs (sorted by time) contributes to its evidence
+    (:func:`evidence_part`).
+
+    ``loss`` per mask ``(HAL, VAL, window)``; ``events`` per ``(axis, AL)``: MI runs, HMI runs and
+    the epochs available on that axis; ``accuracy`` per axis: error above the station's 95th
+    percentile, over the epochs with a solution; ``tails`` per axis.
+    """
+
+    n: int
+    t_first: int
+    t_last: int
+    loss: dict[tuple, _Loss]
+    events: dict[tuple[str, float], tuple[Runs, Runs, int]]
+    accuracy: dict[str, Flags]
+    tails: dict[str, _Tail]
+
+
+def _mask_key(s: ServiceLevel) -> tuple:
+    return (s.hal, s.val, s.continuity_window_s)
+
+
+def evidence_part(
+    x: EpochArrays,
+    services: Sequence[ServiceLevel],
+    interval_s: float | None,
+    q95: Mapping[str, float | None],
+    gap_s: float = 360.0,
+) -> EvidencePart:
+    """The :class:`EvidencePart` of one station's epochs ``x`` (or a piece of them, in time order).
+
+    ``interval_s`` is the station's nominal interval (``None``: unknown), ``q95`` its 95th
+    percentile of each axis's error (:attr:`CountingResult.hpe95`, ``vpe95``).
+    """
+    t_us = x.time_us
+    n = int(t_us.size)
+    interval = interval_s or 1.0
+    next_ok = np.diff(t_us / 1e6) <= 1.5 * interval  # the next epoch is not missing
+    loss = {}
+    for s in services:
+        key = _mask_key(s)
+        if key in loss:
+            continue
+        up = x.pls["horizontal"] < s.hal
+        if s.val is not None:
+            up &= x.pls["vertical"] < s.val
+        lost = up[:-1] & ~(up[1:] & next_ok)
+        loss[key] = _Loss(Flags.of(up), runs(t_us[:-1][lost], key[2]), bool(n and up[0]), bool(n and up[-1]))
+    events = {}
+    for s in services:
+        for a in _AXES:
+            al = s.alert_limit(a)
+            if al is None or (a, al) in events:
+                continue
+            pe, pl_ = x.pe[a], x.pls[a]
+            avail = (pl_ < al) & x.ok
+            mi, hmi = avail & (pe > pl_), avail & (pe > al)
+            events[(a, al)] = (runs(t_us[mi], gap_s), runs(t_us[hmi], gap_s), int(np.count_nonzero(avail)))
+    accuracy = {}
+    for a in _AXES:
+        err, q = x.pe[a][x.ok], q95.get(a)
+        accuracy[a] = Flags.of(err > q if q is not None else np.zeros(err.size, np.bool_))
+    tails = {a: _tail(t_us, *safety_values(x.pe[a], x.si_pls[a]), gap_s) for a in _AXES}
+    first, last = (int(t_us[0]), int(t_us[-1])) if n else (0, 0)
+    return EvidencePart(n, first, last, loss, events, accuracy, tails)
+
+
+def _tail(t_us: np.ndarray, ok: np.ndarray, si: np.ndarray, gap_s: float) -> _Tail:
+    t = t_us[ok]
+    above = tuple(runs(t[si > level], gap_s) for level in SI_LEVELS)
+    if si.size == 0:
+        return _Tail(0, above, None)
+    i = int(np.argmax(si))
+    return _Tail(int(si.size), above, (float(si[i]), int(t[i])))
+
+
+# --------------------------------------------------------------------------------------------------
+# one station from its pieces, then the pooled stations
+
+
+def _join_losses(parts: Sequence[EvidencePart], key: tuple, interval: float) -> Runs:
+    """The loss events of one mask over consecutive pieces: a loss falls on each join where the
+    last epoch before it is available and the first after it is not, or is missing."""
+    window = key[2]
+    out = parts[0].loss[key].losses
+    for prev, nxt in itertools.pairwise(parts):
+        a, b = prev.loss[key], nxt.loss[key]
+        next_ok = b.first_up and nxt.t_first / 1e6 - prev.t_last / 1e6 <= 1.5 * interval
+        if a.last_up and not next_ok:
+            out = out.then(Runs(1, prev.t_last, prev.t_last, 0), window)
+        out = out.then(b.losses, window)
+    return out
+
+
+def _joined_runs(pieces: Sequence[Runs], gap_s: float) -> Runs:
+    out = _NO_RUNS
+    for r in pieces:
+        out = out.then(r, gap_s)
+    return out
 
 
 def _iso(t_s: float) -> str:
     return str(np.datetime64(round(t_s * 1e6), "us").astype("datetime64[ms]"))
 
 
-def _events(d: _Arrays, axis: str, al: float, gap_s: float) -> tuple[CountedEvents, CountedEvents]:
-    pe, pl_ = d.pe[axis], d.pl[axis]
-    avail = (pl_ < al) & d.solution
-    exposure = float(np.count_nonzero(avail)) * (d.interval_s or 0.0)
-    mi = avail & (pe > pl_)
-    hmi = avail & (pe > al)
-    return (
-        CountedEvents(int(np.count_nonzero(mi)), run_clusters(d.t_us[mi] / 1e6, gap_s), exposure, gap_s),
-        CountedEvents(int(np.count_nonzero(hmi)), run_clusters(d.t_us[hmi] / 1e6, gap_s), exposure, gap_s),
+def _station_tail(parts: Sequence[EvidencePart], axis: str, gap_s: float) -> TailCounts:
+    tails = [p.tails[axis] for p in parts]
+    above = [_joined_runs([t.above[i] for t in tails], gap_s) for i in range(len(SI_LEVELS))]
+    best = None
+    for t in tails:  # the earlier piece on a tie, as argmax of the station's series
+        if t.max is not None and (best is None or t.max[0] > best[0]):
+            best = t.max
+    return TailCounts(
+        axis,
+        SI_LEVELS,
+        sum(t.n for t in tails),
+        tuple(r.n for r in above),
+        tuple(r.clusters for r in above),
+        None if best is None else best[0],
+        None if best is None else _iso(best[1] / 1e6),
+        gap_s,
     )
 
 
-def _available(d: _Arrays, s: ServiceLevel) -> np.ndarray:
-    ok = d.pl["horizontal"] < s.hal
-    if s.val is not None:
-        ok &= d.pl["vertical"] < s.val
-    return ok
+def _events_of(parts: Sequence[EvidencePart], key: tuple[str, float], gap_s: float, interval_s: float | None):
+    mi = _joined_runs([p.events[key][0] for p in parts], gap_s)
+    hmi = _joined_runs([p.events[key][1] for p in parts], gap_s)
+    exposure = float(sum(p.events[key][2] for p in parts)) * (interval_s or 0.0)
+    return CountedEvents(mi.n, mi.clusters, exposure, gap_s), CountedEvents(
+        hmi.n, hmi.clusters, exposure, gap_s
+    )
+
+
+_PENDING = CountedQuantile(0.95, 0, 0.0, None, None, None)
+
+
+def _station(
+    name: str,
+    parts: Sequence[EvidencePart],
+    interval_s: float | None,
+    counting: CountingResult,
+    services: Sequence[ServiceLevel],
+    gap_s: float,
+    fallback_s: float,
+    confidence: float,
+) -> tuple[StationEvidence, dict]:
+    """One station's evidence from its pieces (accuracy bounds pending), and its partial."""
+    parts = [p for p in parts if p.n] or list(parts[:1])
+    interval = interval_s or 1.0
+    partial: dict = {}
+    out: dict[str, ServiceEvidence] = {}
+    sizes: dict[tuple, tuple] = {}  # services with the same limits and window (APV-I, LPV) count once
+    for s in services:
+        key = _mask_key(s)
+        if key not in sizes:
+            flags = Flags.joined([p.loss[key].flags for p in parts])
+            n_eff, tau_s, assumed = effective_size(flags, interval, fallback_s)
+            events = _join_losses(parts, key, interval).clusters if flags.size > 1 else 0
+            sizes[key] = (flags.size, n_eff, tau_s, assumed, events)
+        size, n_eff, tau_s, assumed, events = sizes[key]
+        partial[s.name] = _Partial(size, n_eff, tau_s, assumed, events)
+        mi, hmi = {}, {}
+        for a in _AXES:
+            al = s.alert_limit(a)
+            if al is not None:
+                mi[a], hmi[a] = _events_of(parts, (a, al), gap_s, interval_s)
+        k = counting.services[s.name]
+        out[s.name] = ServiceEvidence(
+            _availability(k.combined.n_available, size, n_eff, tau_s, assumed, confidence),
+            _continuity(k.combined.continuity, events, confidence),
+            mi,
+            hmi,
+        )
+    for a in _AXES:
+        flags = Flags.joined([p.accuracy[a] for p in parts])
+        n_eff = effective_size(flags, interval, fallback_s)[0] if flags.size else 0.0
+        partial[("accuracy", a)] = (int(flags.size), n_eff)
+    tails = {a: _station_tail(parts, a, gap_s) for a in _AXES}
+    acc = dict.fromkeys(_AXES, _PENDING)
+    return StationEvidence(name, sum(p.n for p in parts), interval_s, acc, tails, out), partial
 
 
 @dataclass
@@ -310,53 +498,6 @@ class _Partial:
     tau_s: float = 0.0
     assumed: bool = False
     events: int = 0
-
-
-def _station(
-    name: str,
-    d: _Arrays,
-    counting: CountingResult,
-    services: Sequence[ServiceLevel],
-    gap_s: float,
-    fallback_s: float,
-    confidence: float,
-) -> tuple[StationEvidence, dict]:
-    interval = d.interval_s or 1.0
-    t_s = d.t_us / 1e6
-    partial: dict = {}
-    out: dict[str, ServiceEvidence] = {}
-    done: dict[tuple, tuple] = {}  # services with the same limits and window (APV-I, LPV) count once
-    for s in services:
-        key = (s.hal, s.val, s.continuity_window_s)
-        if key not in done:
-            avail = _available(d, s)
-            n_eff, tau_s, assumed = effective_size(avail, interval, fallback_s)
-            events = loss_events(t_s, avail, interval, s.continuity_window_s)
-            mi, hmi = {}, {}
-            for a in _AXES:
-                al = s.alert_limit(a)
-                if al is not None:
-                    mi[a], hmi[a] = _events(d, a, al, gap_s)
-            done[key] = (avail.size, n_eff, tau_s, assumed, events, mi, hmi)
-        size, n_eff, tau_s, assumed, events, mi, hmi = done[key]
-        partial[s.name] = _Partial(size, n_eff, tau_s, assumed, events)
-        k = counting.services[s.name]
-        out[s.name] = ServiceEvidence(
-            _availability(k.combined.n_available, size, n_eff, tau_s, assumed, confidence),
-            _continuity(k.combined.continuity, events, confidence),
-            mi,
-            hmi,
-        )
-    acc = {}
-    for a in _AXES:
-        x = d.pe[a][d.solution]
-        q = counting.hpe95 if a == "horizontal" else counting.vpe95  # numpy's percentile of the same x
-        n_eff = effective_size(x > q, interval, fallback_s)[0] if x.size else 0.0
-        partial[("accuracy", a)] = (x, n_eff)
-        acc[a] = quantile_bounds(x, 0.95, n_eff, confidence, q)
-    tails = {a: _tail_counts(d, a, gap_s) for a in _AXES}
-    ev = StationEvidence(name, int(d.t_us.size), d.interval_s, acc, tails, out)
-    return ev, partial
 
 
 def _availability(k: int, n: int, n_eff: float, tau_s: float, assumed: bool, c: float) -> CountedAvailability:
@@ -407,34 +548,6 @@ def _merge_events(parts: list[CountedEvents]) -> CountedEvents:
     )
 
 
-def counted_evidence(
-    table: pl.DataFrame,
-    counting: CountingResult,
-    services: Sequence[ServiceLevel],
-    *,
-    gap_s: float = 360.0,
-    fallback_s: float = 3600.0,
-    confidence: float = 0.95,
-) -> Evidence:
-    """The counted evidence of ``table`` for each of ``services`` (see the module notes).
-
-    ``counting`` is :func:`~overbound.methods.counting.count_kpis` of the same table: its available
-    epochs and continuity windows are the ones bounded here, so that a verdict can never
-    contradict the counted KPI. Bounds are one-sided at ``confidence`` each.
-    """
-    slices = _station_slices(table) or {"": slice(None)}  # an empty table: one empty station
-    stations, partials = {}, {}
-    for name, rows in slices.items():
-        c = counting.by_station.get(name, counting)
-        stations[name], partials[name] = _station(
-            name, _arrays(table, rows), c, services, gap_s, fallback_s, confidence
-        )
-    if len(stations) == 1:
-        only = next(iter(stations.values()))
-        return Evidence(only, {}, confidence)
-    return Evidence(_pool(stations, partials, counting, services, gap_s, confidence), stations, confidence)
-
-
 def _pool(stations: dict, partials: dict, counting: CountingResult, services, gap_s, c) -> StationEvidence:
     names = list(stations)
     out = {}
@@ -455,13 +568,142 @@ def _pool(stations: dict, partials: dict, counting: CountingResult, services, ga
             {a: _merge_events([e.mi[a] for e in evs]) for a in evs[0].mi},
             {a: _merge_events([e.hmi[a] for e in evs]) for a in evs[0].hmi},
         )
-    acc = {}
-    for a in _AXES:
-        xs = [partials[n][("accuracy", a)] for n in names]
-        x = np.concatenate([v[0] for v in xs])
-        q = counting.hpe95 if a == "horizontal" else counting.vpe95
-        acc[a] = quantile_bounds(x, 0.95, sum(v[1] for v in xs), c, q)
     tails = {a: _merge_tails([stations[n].tails[a] for n in names], a, gap_s) for a in _AXES}
     intervals = {st.interval_s for st in stations.values()}
     interval = intervals.pop() if len(intervals) == 1 else None
+    acc = dict.fromkeys(_AXES, _PENDING)
     return StationEvidence("pooled", sum(st.n_epochs for st in stations.values()), interval, acc, tails, out)
+
+
+# --------------------------------------------------------------------------------------------------
+# the evidence, in two steps: everything but the accuracy bounds, whose quantile levels follow
+# from the effective sizes; then those quantiles, from the table or from another pass over
+# the partitions
+
+
+@dataclass(frozen=True)
+class EvidenceDraft:
+    """The evidence but for the values of the accuracy bounds (:func:`draft_evidence`).
+
+    ``accuracy`` per ``(scope, axis)`` (scope: a station, or ``""`` for the pooled stations when
+    there are several): errors counted, effective size, and the 95th percentile counted.
+    """
+
+    stations: dict[str, StationEvidence]
+    pooled: StationEvidence | None
+    accuracy: dict[tuple[str, str], tuple[int, float, float | None]]
+    confidence: float
+
+    def levels(self) -> dict[tuple[str, str], tuple[float, float]]:
+        """The quantile levels (0-1) of the bounds of each ``(scope, axis)`` with errors: the
+        one-sided Clopper-Pearson bounds of the level 0.95 with the effective size as trials."""
+        out = {}
+        for key, (n, n_eff, _q) in self.accuracy.items():
+            if n:
+                b = clopper_pearson(0.95 * n_eff, n_eff, self.confidence)
+                out[key] = (b.lower, b.upper)
+        return out
+
+    def evidence(self, values: Mapping[tuple[str, str], Sequence[float]]) -> Evidence:
+        """The evidence, ``values`` being the errors' quantiles at :meth:`levels` of each scope."""
+
+        def done(scope: str, st: StationEvidence) -> StationEvidence:
+            acc = {}
+            for a in _AXES:
+                n, n_eff, q = self.accuracy[(scope, a)]
+                lo, hi = values[(scope, a)] if n else (None, None)
+                acc[a] = CountedQuantile(
+                    0.95, n, n_eff, None if q is None else float(q), _float(lo), _float(hi)
+                )
+            return replace(st, accuracy=acc)
+
+        stations = {name: done(name, st) for name, st in self.stations.items()}
+        if self.pooled is None:
+            return Evidence(next(iter(stations.values())), {}, self.confidence)
+        return Evidence(done("", self.pooled), stations, self.confidence)
+
+
+def _float(v) -> float | None:
+    return None if v is None else float(v)
+
+
+def draft_evidence(
+    parts: Mapping[str, Sequence[EvidencePart]],
+    intervals: Mapping[str, float | None],
+    counting: CountingResult,
+    services: Sequence[ServiceLevel],
+    *,
+    gap_s: float = 360.0,
+    fallback_s: float = 3600.0,
+    confidence: float = 0.95,
+) -> EvidenceDraft:
+    """The :class:`EvidenceDraft` of stations given as their pieces in time order (stations in
+    table order), with their nominal intervals (s)."""
+    stations, partials, accuracy = {}, {}, {}
+    for name, ps in parts.items():
+        c = counting.by_station.get(name, counting)
+        stations[name], partials[name] = _station(
+            name, ps, intervals[name], c, services, gap_s, fallback_s, confidence
+        )
+        for a in _AXES:
+            accuracy[(name, a)] = (*partials[name][("accuracy", a)], _q95(c, a))
+    if len(stations) == 1:
+        return EvidenceDraft(stations, None, accuracy, confidence)
+    for a in _AXES:
+        xs = [partials[n][("accuracy", a)] for n in stations]
+        accuracy[("", a)] = (sum(v[0] for v in xs), sum(v[1] for v in xs), _q95(counting, a))
+    return EvidenceDraft(
+        stations, _pool(stations, partials, counting, services, gap_s, confidence), accuracy, confidence
+    )
+
+
+def _q95(counting: CountingResult, axis: str) -> float | None:
+    return counting.hpe95 if axis == "horizontal" else counting.vpe95
+
+
+def counted_evidence(
+    table: pl.DataFrame,
+    counting: CountingResult,
+    services: Sequence[ServiceLevel],
+    *,
+    gap_s: float = 360.0,
+    fallback_s: float = 3600.0,
+    confidence: float = 0.95,
+) -> Evidence:
+    """The counted evidence of ``table`` for each of ``services`` (see the module notes).
+
+    ``counting`` is :func:`~overbound.methods.counting.count_kpis` of the same table: its available
+    epochs and continuity windows are the ones bounded here, so that a verdict can never
+    contradict the counted KPI. Bounds are one-sided at ``confidence`` each. A campaign dataset
+    gets the same evidence by partition (:func:`evidence_part` per partition, joined per station).
+    """
+    x = epoch_arrays(table)
+    if x.time_us is None:
+        raise InputError("<epoch table>", "the counted evidence needs the epochs' times")
+    slices = _station_slices(table) or {"": slice(None)}  # an empty table: one empty station
+    pieces, intervals, errors = {}, {}, {}
+    for name, rows in slices.items():
+        xs = x if isinstance(rows, slice) else _take(x, rows)
+        step = nominal_interval_us(xs.time_us)
+        intervals[name] = None if step is None else step / 1e6
+        c = counting.by_station.get(name, counting)
+        q95 = {a: _q95(c, a) for a in _AXES}
+        pieces[name] = [evidence_part(xs, services, intervals[name], q95, gap_s)]
+        errors[name] = {a: xs.pe[a][xs.ok] for a in _AXES}
+    draft = draft_evidence(
+        pieces, intervals, counting, services, gap_s=gap_s, fallback_s=fallback_s, confidence=confidence
+    )
+    values = {}
+    for (scope, a), levels in draft.levels().items():
+        err = errors[scope][a] if scope else np.concatenate([e[a] for e in errors.values()])
+        values[(scope, a)] = np.quantile(err, list(levels))
+    return draft.evidence(values)
+
+
+def _take(x: EpochArrays, rows: np.ndarray) -> EpochArrays:
+    """The epochs ``rows`` of ``x``."""
+
+    def pick(d: dict) -> dict:
+        return {a: v[rows] for a, v in d.items()}
+
+    return EpochArrays(pick(x.pe), pick(x.pls), pick(x.si_pls), x.ok[rows], x.time_us[rows])

@@ -112,20 +112,22 @@ def merge_counts(*parts: BinCounts) -> BinCounts:
     return _counted(np.concatenate([p.bins for p in parts]), np.concatenate([p.counts for p in parts]))
 
 
-def _virtual_index(n: int, q: float) -> tuple[int, float]:
-    """numpy's linear virtual index ``(n - 1) * (q / 100)``: its floor (clipped) and fraction."""
-    v = (n - 1) * np.true_divide(q, 100)
+def _virtual_index(n: int, q: float, scale: float = 100.0) -> tuple[int, float]:
+    """numpy's linear virtual index ``(n - 1) * (q / scale)``: its floor (clipped) and fraction
+    (``scale`` 100 for ``percentile``, 1 for ``quantile``, which does not divide)."""
+    v = (n - 1) * (q if scale == 1 else np.true_divide(q, scale))
     k = int(np.clip(np.floor(v), 0, n - 1))
     return k, float(v - np.floor(v))
 
 
-def rank_bins(counts: BinCounts, q: float) -> tuple[np.ndarray, int]:
-    """The bins holding the order statistics ``k`` and ``k + 1`` of the percentile ``q``, and
-    the number of values in the bins below the first of them."""
+def rank_bins(counts: BinCounts, q: float, *, scale: float = 100.0) -> tuple[np.ndarray, int]:
+    """The bins holding the order statistics ``k`` and ``k + 1`` of the percentile ``q``
+    (``scale=1``: the quantile ``q``), and the number of values in the bins below the first of
+    them."""
     n = counts.n
     if n == 0:
         raise ValueError("no values")
-    k, _ = _virtual_index(n, q)
+    k, _ = _virtual_index(n, q, scale)
     ranks = [k, min(k + 1, n - 1)]
     ends = np.cumsum(counts.counts)
     which = np.searchsorted(ends, np.array(ranks), side="right")
@@ -160,8 +162,9 @@ def _bin_start(code: int) -> float:
     return float(np.array([u], dtype=np.uint64).view(np.float64)[0])
 
 
-def exact_percentile(n: int, q: float, below: int, values: np.ndarray) -> float:
-    """numpy's ``percentile(pooled, q)`` from the values of the rank bins of all partitions.
+def exact_percentile(n: int, q: float, below: int, values: np.ndarray, *, scale: float = 100.0) -> float:
+    """numpy's ``percentile(pooled, q)`` (``scale=1``: ``quantile(pooled, q)``) from the values of
+    the rank bins of all partitions.
 
     Parameters
     ----------
@@ -170,7 +173,7 @@ def exact_percentile(n: int, q: float, below: int, values: np.ndarray) -> float:
     below : the number of values in the bins below the rank bins (:func:`rank_bins`).
     values : every value in the rank bins, from all partitions (:func:`values_in_bins`).
     """
-    k, g = _virtual_index(n, q)
+    k, g = _virtual_index(n, q, scale)
     s = np.sort(np.asarray(values, dtype=np.float64))
     a = s[k - below]
     b = s[min(k + 1, n - 1) - below]
