@@ -18,6 +18,7 @@ import pytest
 from overbound.campaign import campaign_client, count_campaign, uncached_partitions
 from overbound.io.dataset import partitions, read_dataset
 from overbound.methods.counting import count_kpis
+from overbound.methods.evidence import counted_evidence
 from overbound.services import resolve_services
 from overbound.simulate import SimulationConfig, write_simulation_dataset
 
@@ -79,6 +80,31 @@ def test_cache_is_reused_then_invalidated(dataset: Path, pooled, tmp_path: Path)
     for cache in ds.rglob(".overbound/pass1.pkl"):
         cache.write_bytes(b"not a pickle")
     assert_same(count_campaign(ds, SERVICES).counting, pooled)
+
+
+def test_evidence_by_partition_is_cached_and_equals_the_pooled_table(dataset: Path, tmp_path: Path) -> None:
+    """The verdicts' evidence (passes 3 and 4) equals counted_evidence of the pooled table, from the
+    cache too; a replaced partition recomputes its own parts only (the data are the same here, so
+    are the station's percentiles), and an unreadable one is left out of everything."""
+    table, _ = read_dataset(dataset, columns=("alert",))
+    expected = counted_evidence(table, count_kpis(table, SERVICES), SERVICES)
+    ds = _copy(dataset, tmp_path)
+    first = count_campaign(ds, SERVICES, evidence=True)
+    assert_same(first.evidence, expected)
+    again = count_campaign(ds, SERVICES, evidence=True)
+    assert again.n_computed == 0 and again.n_cached == first.n_computed
+    assert_same(again.evidence, expected)
+    part = partitions(ds)[4].path
+    os.utime(part, ns=(time.time_ns(), time.time_ns() + 10**9))
+    third = count_campaign(ds, SERVICES, evidence=True)
+    assert 3 <= third.n_computed <= 5, third.n_computed  # pass 1, evidence, bounds (values, windows)
+    assert_same(third.evidence, expected)
+    bad = partitions(ds)[8]
+    bad.path.write_bytes(b"PAR1 this is not parquet")
+    fourth = count_campaign(ds, SERVICES, evidence=True)
+    assert [f.key for f in fourth.failures] == [bad.key]
+    rest, _ = read_dataset(ds, columns=("alert",), skip={bad.key})
+    assert_same(fourth.evidence, counted_evidence(rest, count_kpis(rest, SERVICES), SERVICES))
 
 
 def test_unreadable_partition_is_reported_and_the_rest_goes_on(dataset: Path, tmp_path: Path) -> None:

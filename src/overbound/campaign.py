@@ -6,6 +6,13 @@ merge in a tree (``split_every`` at a time, in table order) and the merged resul
 into the counting KPIs of the whole campaign, equal to those of its pooled table. Memory per
 task is one partition plus the partials merged, never the campaign.
 
+Passes 1 and 2 give the counting. With ``evidence=True`` two more give the counted evidence of the
+verdicts (:mod:`overbound.methods.evidence`), equal to that of the pooled table: pass 3 reduces
+each partition to its :class:`~overbound.methods.evidence.EvidencePart` (it needs the station's
+interval and 95th percentiles, known after pass 2), pass 4 collects the values of the accuracy
+bounds (their quantile levels follow from the effective sizes of pass 3). A station's evidence
+holds its 0/1 series packed 8 to a byte (7 series: 4 MB each per station-year at 1 Hz).
+
 Execution
 ---------
 :func:`campaign_client` gives a ``distributed.Client``: on an existing scheduler
@@ -17,13 +24,16 @@ Cache
 -----
 Partials are kept beside the data (zlib-compressed pickles written by this package: load only
 datasets you trust, as for any pickle): per partition, ``<partition dir>/.overbound/`` holds its
-pass 1 (``pass1.pkl``), its pass-2 values (``values.pkl``, with the bins they were collected for)
-and, where pass 2 recounts them, its windows (``windows.pkl``); per station,
-``station=ID/.overbound/pass1.pkl`` and ``pass2.pkl`` hold its merged partials. Each is stored
+pass 1 (``pass1.pkl``), its pass-2 values (``values.pkl``, with the bins they were collected for),
+where pass 2 recounts them its windows (``windows.pkl``), its evidence part (``evidence.pkl``) and
+the values of the evidence's bounds (``bounds.pkl``); per station, ``station=ID/.overbound/``
+holds the same merged (``pass1.pkl``, ``pass2.pkl``, ``evidence.pkl``, ``bounds.pkl``). Each is stored
 with a key of what it depends on: the overbound version, the partition files' size and
 modification time (partitions are replaced by rename, so a new file has a new time), the
-services, the time window, and for pass 2 the part of the plan it read; stored values hold while
-their bins cover the new rank bins. A key that differs means recompute; a cache that cannot be
+services, the time window, for pass 2 the part of the plan it read, for pass 3 the station's
+interval and 95th percentiles; stored values hold while their bins cover the new rank bins. (A day
+added to a station moves its 95th percentiles: its evidence parts are computed again, the other
+stations' are not.) A key that differs means recompute; a cache that cannot be
 written (read-only dataset) is skipped. So re-analysing after one day was added reads one file
 per unchanged station, the cached partials of the changed one, and the new partition.
 """
