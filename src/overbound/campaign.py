@@ -6,12 +6,14 @@ merge in a tree (``split_every`` at a time, in table order) and the merged resul
 into the counting KPIs of the whole campaign, equal to those of its pooled table. Memory per
 task is one partition plus the partials merged, never the campaign.
 
-Passes 1 and 2 give the counting. With ``evidence=True`` two more give the counted evidence of the
-verdicts (:mod:`overbound.methods.evidence`), equal to that of the pooled table: pass 3 reduces
-each partition to its :class:`~overbound.methods.evidence.EvidencePart` (it needs the station's
-interval and 95th percentiles, known after pass 2), pass 4 collects the values of the accuracy
-bounds (their quantile levels follow from the effective sizes of pass 3). A station's evidence
-holds its 0/1 series packed 8 to a byte (7 series: 4 MB each per station-year at 1 Hz).
+Passes 1 and 2 give the counting. With ``evidence=True`` they also give the counted evidence of
+the verdicts (:mod:`overbound.methods.evidence`), equal to that of the pooled table: pass 2
+reduces each partition to its :class:`~overbound.methods.evidence.EvidencePart` too (it needs the
+station's interval, known after pass 1; which errors exceed the station's 95th percentile, not
+known before pass 2 ends, is kept as the flags above the percentile's target bins and the values
+in them), and pass 3 collects the values of the accuracy bounds (their quantile levels follow
+from the effective sizes). A station's evidence holds its 0/1 series packed 8 to a byte (7
+series: 4 MB each per station-year at 1 Hz).
 
 Execution
 ---------
@@ -27,13 +29,12 @@ datasets you trust, as for any pickle): per partition, ``<partition dir>/.overbo
 pass 1 (``pass1.pkl``), its pass-2 values (``values.pkl``, with the bins they were collected for),
 where pass 2 recounts them its windows (``windows.pkl``), its evidence part (``evidence.pkl``) and
 the values of the evidence's bounds (``bounds.pkl``); per station, ``station=ID/.overbound/``
-holds the same merged (``pass1.pkl``, ``pass2.pkl``, ``evidence.pkl``, ``bounds.pkl``). Each is stored
+holds the same merged (``pass1.pkl``, ``pass2.pkl``, ``bounds.pkl``). Each is stored
 with a key of what it depends on: the overbound version, the partition files' size and
 modification time (partitions are replaced by rename, so a new file has a new time), the
-services, the time window, for pass 2 the part of the plan it read, for pass 3 the station's
-interval and 95th percentiles; stored values hold while their bins cover the new rank bins. (A day
-added to a station moves its 95th percentiles: its evidence parts are computed again, the other
-stations' are not.) A key that differs means recompute; a cache that cannot be
+services, the time window, and for pass 2 the part of the plan it read; stored values hold while
+their bins cover the new rank bins, evidence parts while their error ranges hold the new
+percentile bins. A key that differs means recompute; a cache that cannot be
 written (read-only dataset) is skipped. So re-analysing after one day was added reads one file
 per unchanged station, the cached partials of the changed one, and the new partition.
 """
@@ -60,7 +61,7 @@ from overbound._allocator import keep_freed_memory
 from overbound.io.dataset import Partition, partition_key, partitions, read_manifest
 from overbound.io.open import filter_time
 from overbound.io.schema import COLUMNS, REQUIRED, InputError
-from overbound.methods.counting import CountingResult
+from overbound.methods.counting import AXES, CountingResult
 from overbound.methods.counting_partitions import (
     FirstPass,
     SecondPass,
@@ -68,20 +69,22 @@ from overbound.methods.counting_partitions import (
     bounds_plan,
     covers,
     daily_availability,
-    evidence_inputs,
+    evidence_draft,
     finalize,
     finish_evidence,
     first_pass,
     merge_first,
     merge_second,
     part_of,
+    percentile_range,
     plan_second,
     second_values,
     second_windows,
+    station_evidence_inputs,
     station_targets,
     windows_plan,
 )
-from overbound.methods.evidence import Evidence, EvidencePart, draft_evidence
+from overbound.methods.evidence import Evidence, EvidencePart
 from overbound.services import ServiceLevel
 
 __all__ = [
@@ -287,14 +290,17 @@ def _first_task(partition: Partition, services, bins: int, use_cache: bool, wind
     return _Done(value, computed=1)
 
 
-def _second_task(partition: Partition, plan: SecondPlan, services, use_cache: bool, window: Window) -> _Done:
-    """Pass 2 of one partition: its values, and its windows when the plan asks; each from the
-    cache when its key (and, for values, the bins collected) still holds."""
+def _second_task(
+    partition: Partition, plan: SecondPlan, services, use_cache: bool, window: Window, evidence: bool
+) -> _Done:
+    """Pass 2 of one partition: its values, its windows when the plan asks, and its evidence part
+    when ``evidence``; each from the cache when its key (and for values and evidence, the range
+    collected) still holds."""
     keep_freed_memory()
     station, label = partition.station, partition.key
     table = None
     cached = computed = 0
-    windows = {}
+    windows, parts = {}, {}
     try:
         fkey = (_file_key(partition.path), window)
         if label in plan.redo:
@@ -309,11 +315,48 @@ def _second_task(partition: Partition, plan: SecondPlan, services, use_cache: bo
             else:
                 cached += 1
             windows[label] = hit
+        if evidence:
+            part, hit, table = _evidence_part(partition, plan, services, use_cache, window, table)
+            cached, computed = cached + hit, computed + (not hit)
+            parts = {station: [part]} if part is not None else {}
         values, hit = _values(partition, plan, use_cache, window, "values.pkl", table)
         cached, computed = cached + hit, computed + (not hit)
     except (InputError, OSError, pl.exceptions.PolarsError, ValueError) as exc:
         return _Done(None, (_failure(partition, exc),))
-    return _Done(SecondPass(windows, values), cached=cached, computed=computed)
+    return _Done(SecondPass(windows, values, parts), cached=cached, computed=computed)
+
+
+#: Runs declustering gap of the evidence's MI, HMI and safety-index clusters (s).
+EVIDENCE_GAP_S = 360.0
+
+
+def _evidence_part(partition: Partition, plan: SecondPlan, services, use_cache: bool, window: Window, table):
+    """A partition's evidence part (``None``: no epoch), whether it came from the cache, and the
+    table if it was read. A stored part holds while its error ranges hold the station's new
+    percentile bins."""
+    station = partition.station
+    interval_s, ranges = station_evidence_inputs(plan, station)
+    key = _key(_file_key(partition.path), window, _services_key(services), interval_s, EVIDENCE_GAP_S)
+    path = _partition_cache(partition, "evidence.pkl")
+    stored = _load_cached(path, key) if use_cache else None
+    if stored is not None and _parts_hold([p for p in stored if p is not None], plan, station):
+        return stored[0], True, table
+    if table is None:
+        table = _read(partition, window)
+    part = None if table.is_empty() else part_of(table, services, (interval_s, ranges), EVIDENCE_GAP_S)
+    if use_cache:
+        _store(path, key, [part])
+    return part, False, table
+
+
+def _parts_hold(parts: list[EvidencePart], plan: SecondPlan, station: str) -> bool:
+    """Whether evidence parts computed under an earlier plan still tell which errors exceed the
+    station's 95th percentile: their ranges hold its new percentile bins."""
+    for a in AXES:
+        r = percentile_range(plan, station, a)
+        if r is not None and not all(p.accuracy[a].lo <= r[0] and r[1] <= p.accuracy[a].hi for p in parts):
+            return False
+    return True
 
 
 def _values(
@@ -342,35 +385,6 @@ def _bounds_task(partition: Partition, plan: SecondPlan, use_cache: bool, window
     except (InputError, OSError, pl.exceptions.PolarsError, ValueError) as exc:
         return _Done(None, (_failure(partition, exc),))
     return _Done(SecondPass({}, values), cached=int(hit), computed=int(not hit))
-
-
-def _evidence_task(
-    partition: Partition, services, station: tuple, gap_s: float, use_cache: bool, window: Window
-) -> _Done:
-    """The :class:`~overbound.methods.evidence.EvidencePart` of one partition, ``station`` being
-    its station's nominal interval (s) and 95th percentiles per axis."""
-    keep_freed_memory()
-    cache = _partition_cache(partition, "evidence.pkl")
-    try:
-        key = _key(_file_key(partition.path), window, _services_key(services), station, gap_s)
-        if use_cache and (hit := _load_cached(cache, key)) is not None:
-            return _Done(hit, cached=1)
-        table = _read(partition, window)
-        value = {} if table.is_empty() else {partition.station: [part_of(table, services, station, gap_s)]}
-    except (InputError, OSError, pl.exceptions.PolarsError, ValueError) as exc:
-        return _Done(None, (_failure(partition, exc),))
-    if use_cache:
-        _store(cache, key, value)
-    return _Done(value, computed=1)
-
-
-def merge_evidence_parts(*parts: dict[str, list[EvidencePart]]) -> dict[str, list[EvidencePart]]:
-    """Evidence parts of consecutive partitions, per station in time order."""
-    out: dict[str, list[EvidencePart]] = {}
-    for p in parts:
-        for name, pieces in p.items():
-            out.setdefault(name, []).extend(pieces)
-    return out
 
 
 def _merge_done(merge: Callable, *parts: _Done) -> _Done:
@@ -458,7 +472,7 @@ def count_campaign(
     ``client``: a ``distributed.Client`` (:func:`campaign_client`), or ``None`` to run in this
     process. ``time_range``: ``(start, stop)`` GPS times (naive, ``None`` for open), the epochs
     ``start <= time < stop`` only; days outside are not read. ``evidence``: also the counted
-    evidence of the verdicts (two more passes: the evidence parts, then the values of its
+    evidence of the verdicts (its parts in pass 2, then one more pass for the values of its
     quantile bounds). ``progress(stage, done, total)`` is called as partitions are done.
 
     Raises
@@ -541,30 +555,25 @@ class _Run:
         read = {label for st in first.stations.values() for label in st.labels}  # not failed, not empty
         by_station = {n: [p for p in ps if p.key in read] for n, ps in by_station.items()}
         by_station = {n: ps for n, ps in by_station.items() if ps}
-        two = _pass_two(self.runner, by_station, keys, first, plan, self.shared_services, **opts)
+        two = _pass_two(self.runner, by_station, keys, first, plan, self.shared_services, evidence, **opts)
         if not self.done(two):
             return None
         second: SecondPass = two.partial or SecondPass({}, {})
         counting = finalize(first, second, plan, self.services, histogram_bins=self.bins)
         if not evidence:
             return first, counting, None
-        found = self._evidence(by_station, keys, first, plan, counting, opts)
-        return None if found is None else (first, counting, found)
-
-    def _evidence(self, by_station, keys, first, plan, counting, opts) -> Evidence | None:
-        """The counted evidence (pass 3, the evidence parts; pass 4, the values of its quantile
-        bounds), or ``None`` when a partition failed."""
-        stations = evidence_inputs(plan, counting)
-        three = _pass_evidence(self.runner, by_station, keys, stations, self.shared_services, **opts)
+        # pass 3: the values of the evidence's accuracy bounds, whose quantile levels follow from
+        # the effective sizes of pass 2's evidence parts
+        draft = evidence_draft(second, plan, counting, self.services, EVIDENCE_GAP_S)
+        bounds, levels = bounds_plan(first, draft)
+        three = _pass_bounds(self.runner, by_station, keys, bounds, **opts)
         if not self.done(three):
             return None
-        pieces = three.partial or {}
-        draft = draft_evidence(pieces, {n: stations[n][0] for n in pieces}, counting, self.services)
-        qplan, levels = bounds_plan(first, draft)
-        four = _pass_bounds(self.runner, by_station, keys, qplan, **opts)
-        if not self.done(four):
-            return None
-        return finish_evidence(first, draft, qplan, levels, four.partial or SecondPass({}, {}))
+        return (
+            first,
+            counting,
+            finish_evidence(first, draft, bounds, levels, three.partial or SecondPass({}, {})),
+        )
 
 
 def _pass_one(runner, by_station, keys, svc, bins, *, cache, window, progress, dataset) -> _Done:
@@ -583,45 +592,38 @@ def _pass_one(runner, by_station, keys, svc, bins, *, cache, window, progress, d
     )
 
 
-def _pass_two(runner, by_station, keys, first, plan, svc, *, cache, window, progress, dataset) -> _Done:
-    """Pass 2 of the partitions read in pass 1; a station's cached values hold while they cover
-    the plan's rank bins."""
+def _pass_two(
+    runner, by_station, keys, first, plan, svc, evidence: bool, *, cache, window, progress, dataset
+) -> _Done:
+    """Pass 2 of the partitions read in pass 1 (with their evidence parts when ``evidence``); a
+    station's cached values hold while they cover the plan's rank bins, its evidence parts while
+    their error ranges hold its percentile bins."""
     shared_plan = runner.share(plan)
+
+    def holds(name: str, stored) -> bool:
+        if not covers(stored[0], plan, (name, "")):
+            return False
+        parts = stored[-1].evidence.get(name)
+        return not evidence or (parts is not None and _parts_hold(parts, plan, name))
+
     return _stations_pass(
         runner,
         by_station,
         "pass2.pkl",
         lambda name: _key(keys[name], _plan_key(plan, first.stations[name].labels, name)),
-        lambda name, ps: [(p, shared_plan, svc, cache, _cut(p, window)) for p in ps],
+        lambda name, ps: [(p, shared_plan, svc, cache, _cut(p, window), evidence) for p in ps],
         _second_task,
         merge_second,
         cache,
         _ticks(progress, "pass 2", sum(map(len, by_station.values()))),
         dataset,
-        check=lambda name, stored: covers(stored[0], plan, (name, "")),
+        check=holds,
         wrap=lambda name, partial: (station_targets(plan, name), partial),
     )
 
 
-def _pass_evidence(runner, by_station, keys, stations, svc, *, cache, window, progress, dataset) -> _Done:
-    """Pass 3: the evidence parts of every partition (``stations``: per station its interval and
-    95th percentiles, which the parts depend on)."""
-    return _stations_pass(
-        runner,
-        by_station,
-        "evidence.pkl",
-        lambda name: _key(keys[name], stations[name]),
-        lambda name, ps: [(p, svc, stations[name], 360.0, cache, _cut(p, window)) for p in ps],
-        _evidence_task,
-        merge_evidence_parts,
-        cache,
-        _ticks(progress, "evidence", sum(map(len, by_station.values()))),
-        dataset,
-    )
-
-
 def _pass_bounds(runner, by_station, keys, plan, *, cache, window, progress, dataset) -> _Done:
-    """Pass 4: the values of the evidence's quantile bounds; a station's stored values hold while
+    """Pass 3: the values of the evidence's quantile bounds; a station's stored values hold while
     they cover the plan's rank bins."""
     shared_plan = runner.share(plan)
     return _stations_pass(
@@ -633,7 +635,7 @@ def _pass_bounds(runner, by_station, keys, plan, *, cache, window, progress, dat
         _bounds_task,
         merge_second,
         cache,
-        _ticks(progress, "evidence bounds", sum(map(len, by_station.values()))),
+        _ticks(progress, "pass 3", sum(map(len, by_station.values()))),
         dataset,
         check=lambda name, stored: covers(stored[0], plan, (name, "")),
         wrap=lambda name, partial: (station_targets(plan, name), partial),

@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -75,6 +76,7 @@ from overbound.stats.mergeable import (
     exact_percentile,
     merge_counts,
     rank_bins,
+    value_range,
     values_in_bins,
 )
 
@@ -464,21 +466,34 @@ def _slot(t: np.ndarray | int, t0: int, dt: int):
 @dataclass
 class SecondPass:
     """Pass-2 partial of a set of partitions: the windows of the partitions of ``plan.redo``
-    by label, and the values in the percentile bins."""
+    by label, the values in the percentile bins, and when asked the evidence parts per station
+    in time order (:func:`part_of`)."""
 
     windows: dict[str, PartitionWindows]
     values: dict[tuple[str, str], list[np.ndarray]]
+    evidence: dict[str, list[EvidencePart]] = field(default_factory=dict)
 
 
 def second_pass(
-    table: pl.DataFrame, plan: SecondPlan, services: Sequence[ServiceLevel], *, label: str = ""
+    table: pl.DataFrame,
+    plan: SecondPlan,
+    services: Sequence[ServiceLevel],
+    *,
+    label: str = "",
+    evidence: bool = False,
+    gap_s: float = 360.0,
 ) -> SecondPass:
     """Pass 2 on one partition (the same table and label as its :func:`first_pass`): its values
-    (:func:`second_values`), and its windows when its label is in ``plan.redo``."""
+    (:func:`second_values`), its windows when its label is in ``plan.redo``, and with ``evidence``
+    its evidence part (:func:`part_of`)."""
     if table.is_empty():
         return SecondPass({}, {})
     windows = {label: second_windows(table, plan, services, label=label)} if label in plan.redo else {}
-    return SecondPass(windows, second_values(table, plan))
+    parts = {}
+    if evidence:
+        name = _station_of(table)
+        parts = {name: [part_of(table, services, evidence_inputs(plan)[name], gap_s)]}
+    return SecondPass(windows, second_values(table, plan), parts)
 
 
 def second_values(
@@ -571,11 +586,14 @@ def merge_second(*parts: SecondPass) -> SecondPass:
     """The pass-2 partial of ``parts`` together, given in table order."""
     windows: dict = {}
     values: dict = {}
+    evidence: dict = {}
     for p in parts:
         windows.update(p.windows)
         for key, arrays in p.values.items():
             values[key] = values.get(key, []) + arrays
-    return SecondPass(windows, values)
+        for name, pieces in p.evidence.items():
+            evidence[name] = evidence.get(name, []) + pieces
+    return SecondPass(windows, values, evidence)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -807,22 +825,35 @@ def count_partitioned(
 
 
 # --------------------------------------------------------------------------------------------------
-# the counted evidence of the verdicts: pass 3 (the evidence parts), pass 4 (the values of its
+# the counted evidence of the verdicts: its parts in pass 2, then pass 3 (the values of its
 # quantile bounds), the same as :func:`~overbound.methods.evidence.counted_evidence` of the table
 
 #: The percentile variable of each axis's error (the evidence's accuracy bounds).
 ERROR_VARIABLE = {"horizontal": "hpe", "vertical": "vpe"}
 
 
-def evidence_inputs(plan: SecondPlan, counting: CountingResult) -> dict[str, tuple]:
-    """Per station what its evidence parts depend on: ``(interval_s, ((axis, q95), ...))``, its
-    nominal interval and the 95th percentiles of its errors."""
-    out = {}
-    for name, grid in plan.grids.items():
-        c = counting.by_station.get(name, counting)
-        q95 = tuple((a, c.hpe95 if a == "horizontal" else c.vpe95) for a in AXES)
-        out[name] = (None if grid is None else grid[1] / 1e6, q95)
-    return out
+def evidence_inputs(plan: SecondPlan) -> dict[str, tuple]:
+    """Per station what its evidence parts depend on (:func:`station_evidence_inputs`)."""
+    return {name: station_evidence_inputs(plan, name) for name in plan.grids}
+
+
+def station_evidence_inputs(plan: SecondPlan, station: str) -> tuple:
+    """``(interval_s, ((axis, (lo, hi)), ...))``: the station's nominal interval and per axis the
+    range of values its 95th percentile of the error lies in, that of its pass-2 target bins (the
+    bins of the order statistics and their neighbours, contiguous among the station's bins)."""
+    ranges = []
+    for a in AXES:
+        bins = plan.targets.get((station, ERROR_VARIABLE[a]))
+        ranges.append((a, (math.inf, math.inf) if bins is None else value_range(bins)))
+    grid = plan.grids.get(station)
+    return None if grid is None else grid[1] / 1e6, tuple(ranges)
+
+
+def percentile_range(plan: SecondPlan, station: str, axis: str) -> tuple[float, float] | None:
+    """The range of values the station's 95th percentile of the ``axis`` error lies in: that of
+    the bins of its order statistics (``None``: no error)."""
+    below = plan.below.get((station, ERROR_VARIABLE[axis], 95.0))
+    return None if below is None else value_range(below[0])
 
 
 def part_of(
@@ -834,7 +865,7 @@ def part_of(
 
 
 def bounds_plan(first: FirstPass, draft: EvidenceDraft) -> tuple[SecondPlan, dict]:
-    """The plan of pass 4 (:func:`quantile_plan`) and the quantile levels it collects."""
+    """The plan of pass 3 (:func:`quantile_plan`) and the quantile levels it collects."""
     levels = {(scope, ERROR_VARIABLE[a]): lv for (scope, a), lv in draft.levels().items()}
     return quantile_plan(first, levels), levels
 
@@ -842,9 +873,17 @@ def bounds_plan(first: FirstPass, draft: EvidenceDraft) -> tuple[SecondPlan, dic
 def finish_evidence(
     first: FirstPass, draft: EvidenceDraft, plan: SecondPlan, levels: dict, values: SecondPass
 ):
-    """The evidence, from the values pass 4 collected for :func:`bounds_plan`."""
+    """The evidence, from the values pass 3 collected for :func:`bounds_plan`."""
     found = exact_quantiles(first, plan, values, levels)
     return draft.evidence({(scope, a): found[(scope, ERROR_VARIABLE[a])] for scope, a in draft.levels()})
+
+
+def evidence_draft(
+    second: SecondPass, plan: SecondPlan, counting: CountingResult, services, gap_s: float = 360.0
+) -> EvidenceDraft:
+    """The evidence but its accuracy bounds, from the evidence parts of pass 2."""
+    intervals = {n: station_evidence_inputs(plan, n)[0] for n in second.evidence}
+    return draft_evidence(second.evidence, intervals, counting, services, gap_s=gap_s)
 
 
 def evidence_partitioned(
@@ -856,16 +895,16 @@ def evidence_partitioned(
     gap_s: float = 360.0,
 ) -> Evidence:
     """:func:`~overbound.methods.evidence.counted_evidence` of the pooled table, from the same
-    ``partitions`` as :func:`count_partitioned` (its merged pass 1 and result): passes 3 and 4 in
-    this process."""
-    inputs = evidence_inputs(plan_second(first, services), counting)
-    pieces: dict[str, list[EvidencePart]] = {}
-    for load in partitions:
-        table = load()
-        if not table.is_empty():
-            name = _station_of(table)
-            pieces.setdefault(name, []).append(part_of(table, services, inputs[name], gap_s))
-    draft = draft_evidence(pieces, {n: inputs[n][0] for n in pieces}, counting, services, gap_s=gap_s)
-    plan, levels = bounds_plan(first, draft)
-    values = [second_values(t, plan) for load in partitions if not (t := load()).is_empty()]
-    return finish_evidence(first, draft, plan, levels, merge_second(*(SecondPass({}, v) for v in values)))
+    ``partitions`` as :func:`count_partitioned` (its merged pass 1 and result), in this process:
+    pass 2 with the evidence parts, then pass 3 for the values of the accuracy bounds."""
+    plan = plan_second(first, services)
+    second = merge_second(
+        *(
+            second_pass(load(), plan, services, label=str(i), evidence=True, gap_s=gap_s)
+            for i, load in enumerate(partitions)
+        )
+    )
+    draft = evidence_draft(second, plan, counting, services, gap_s)
+    bounds, levels = bounds_plan(first, draft)
+    values = [second_values(t, bounds) for load in partitions if not (t := load()).is_empty()]
+    return finish_evidence(first, draft, bounds, levels, merge_second(*(SecondPass({}, v) for v in values)))

@@ -53,6 +53,7 @@ __all__ = [
     "CountedContinuity",
     "CountedEvents",
     "CountedQuantile",
+    "ErrorsAbove",
     "Evidence",
     "EvidenceDraft",
     "EvidencePart",
@@ -60,6 +61,7 @@ __all__ = [
     "TailCounts",
     "counted_evidence",
     "draft_evidence",
+    "error_range",
     "evidence_part",
 ]
 
@@ -297,6 +299,37 @@ class _Loss:
 
 
 @dataclass(frozen=True, slots=True)
+class ErrorsAbove:
+    """Which errors of a piece (over its epochs with a solution) exceed the station's 95th
+    percentile :math:`q`, before :math:`q` is known: ``above`` those at or above ``hi``, and the
+    ``index`` and ``value`` of those in ``[lo, hi)``, the range :math:`q` is known to lie in (the
+    bins of its order statistics and their neighbours, :func:`error_range`)."""
+
+    above: Flags
+    lo: float
+    hi: float
+    index: np.ndarray
+    value: np.ndarray
+
+    @classmethod
+    def of(cls, err: np.ndarray, lo: float, hi: float) -> ErrorsAbove:
+        near = np.flatnonzero((err >= lo) & (err < hi))
+        return cls(Flags.of(err >= hi), lo, hi, near, err[near])
+
+    def holds(self, q: float) -> bool:
+        """Whether the flags of ``q`` can be told from these (``lo <= q < hi``)."""
+        return self.lo <= q < self.hi
+
+
+def error_range(q: float | None) -> tuple[float, float]:
+    """The range of :class:`ErrorsAbove` when :math:`q` is known: the errors ``> q`` are those
+    ``>= nextafter(q)``. No percentile (no error): an empty range at infinity."""
+    if q is None:
+        return (math.inf, math.inf)
+    return (q, float(np.nextafter(q, math.inf)))
+
+
+@dataclass(frozen=True, slots=True)
 class _Tail:
     """The safety index of one axis in a piece: epochs with one, runs above each of
     :data:`SI_LEVELS`, and the largest with its time (the first on a tie)."""
@@ -312,8 +345,8 @@ class EvidencePart:
     (:func:`evidence_part`).
 
     ``loss`` per mask ``(HAL, VAL, window)``; ``events`` per ``(axis, AL)``: MI runs, HMI runs and
-    the epochs available on that axis; ``accuracy`` per axis: error above the station's 95th
-    percentile, over the epochs with a solution; ``tails`` per axis.
+    the epochs available on that axis; ``accuracy`` per axis: which errors exceed the station's 95th
+    percentile, over the epochs with a solution (:class:`ErrorsAbove`); ``tails`` per axis.
     """
 
     n: int
@@ -321,7 +354,7 @@ class EvidencePart:
     t_last: int
     loss: dict[tuple, _Loss]
     events: dict[tuple[str, float], tuple[Runs, Runs, int]]
-    accuracy: dict[str, Flags]
+    accuracy: dict[str, ErrorsAbove]
     tails: dict[str, _Tail]
 
 
@@ -333,13 +366,14 @@ def evidence_part(
     x: EpochArrays,
     services: Sequence[ServiceLevel],
     interval_s: float | None,
-    q95: Mapping[str, float | None],
+    q95: Mapping[str, tuple[float, float]],
     gap_s: float = 360.0,
 ) -> EvidencePart:
     """The :class:`EvidencePart` of one station's epochs ``x`` (or a piece of them, in time order).
 
-    ``interval_s`` is the station's nominal interval (``None``: unknown), ``q95`` its 95th
-    percentile of each axis's error (:attr:`CountingResult.hpe95`, ``vpe95``).
+    ``interval_s`` is the station's nominal interval (``None``: unknown); ``q95`` per axis a range
+    ``[lo, hi)`` that holds the station's 95th percentile of the error
+    (:attr:`CountingResult.hpe95`, ``vpe95``; :func:`error_range` of it when known).
     """
     t_us = x.time_us
     n = int(t_us.size)
@@ -365,10 +399,7 @@ def evidence_part(
             avail = (pl_ < al) & x.ok
             mi, hmi = avail & (pe > pl_), avail & (pe > al)
             events[(a, al)] = (runs(t_us[mi], gap_s), runs(t_us[hmi], gap_s), int(np.count_nonzero(avail)))
-    accuracy = {}
-    for a in _AXES:
-        err, q = x.pe[a][x.ok], q95.get(a)
-        accuracy[a] = Flags.of(err > q if q is not None else np.zeros(err.size, np.bool_))
+    accuracy = {a: ErrorsAbove.of(x.pe[a][x.ok], *q95[a]) for a in _AXES}
     tails = {a: _tail(t_us, *safety_values(x.pe[a], x.si_pls[a]), gap_s) for a in _AXES}
     first, last = (int(t_us[0]), int(t_us[-1])) if n else (0, 0)
     return EvidencePart(n, first, last, loss, events, accuracy, tails)
@@ -481,12 +512,26 @@ def _station(
             hmi,
         )
     for a in _AXES:
-        flags = Flags.joined([p.accuracy[a] for p in parts])
+        flags = _errors_above(parts, a, _q95(counting, a))
         n_eff = effective_size(flags, interval, fallback_s)[0] if flags.size else 0.0
         partial[("accuracy", a)] = (int(flags.size), n_eff)
     tails = {a: _station_tail(parts, a, gap_s) for a in _AXES}
     acc = dict.fromkeys(_AXES, _PENDING)
     return StationEvidence(name, sum(p.n for p in parts), interval_s, acc, tails, out), partial
+
+
+def _errors_above(parts: Sequence[EvidencePart], axis: str, q: float | None) -> np.ndarray:
+    """The station's 0/1 series of its errors above its 95th percentile ``q``."""
+    pieces = [p.accuracy[axis] for p in parts]
+    flags = Flags.joined([e.above for e in pieces])
+    start = 0
+    for e in pieces:
+        if e.value.size:
+            if q is None or not e.holds(q):
+                raise ValueError(f"the 95th percentile {q} is outside the range [{e.lo}, {e.hi}) of a part")
+            flags[start + e.index[e.value > q]] = True
+        start += e.above.n
+    return flags
 
 
 @dataclass
@@ -687,7 +732,7 @@ def counted_evidence(
         step = nominal_interval_us(xs.time_us)
         intervals[name] = None if step is None else step / 1e6
         c = counting.by_station.get(name, counting)
-        q95 = {a: _q95(c, a) for a in _AXES}
+        q95 = {a: error_range(_q95(c, a)) for a in _AXES}
         pieces[name] = [evidence_part(xs, services, intervals[name], q95, gap_s)]
         errors[name] = {a: xs.pe[a][xs.ok] for a in _AXES}
     draft = draft_evidence(

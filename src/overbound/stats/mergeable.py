@@ -143,13 +143,20 @@ def values_in_bins(x: np.ndarray, bins: np.ndarray) -> np.ndarray:
         return x[:0]
     # positive finite bins (errors, safety indices): first the few values between the first and
     # the last bin by two float comparisons, then their bins; otherwise the bins of all
-    lo, hi = _bin_start(int(bins[0])), _bin_start(int(bins[-1]) + 1)
+    lo, hi = value_range(bins)
     if lo > 0 and np.isfinite(hi):
         x = x[(x >= lo) & (x < hi)]
     codes = _bins(x)
     i = np.searchsorted(bins, codes)  # bins are sorted (as rank_bins gives them)
     np.minimum(i, bins.size - 1, out=i)
     return x[bins[i] == codes]
+
+
+def value_range(bins: np.ndarray) -> tuple[float, float]:
+    """``[lo, hi)``: from the smallest float64 of the first of ``bins`` (sorted) to that of the bin
+    after the last; every value of those bins lies in it (positive bins only: the order of the
+    bins is the values' order there)."""
+    return _bin_start(int(bins[0])), _bin_start(int(bins[-1]) + 1)
 
 
 def _bin_start(code: int) -> float:
