@@ -102,6 +102,10 @@ COLUMN_TYPES = {c.name: c.dtype for c in COLUMNS}
 VALUE_COLUMNS = ("hpe", "vpe", "hpl", "vpl", "alert")
 #: Partials merged per task of the reduction tree.
 SPLIT_EVERY = 32
+#: Partitions per Dask task (read one after the other, their partials merged): a task of about a
+#: second, so that the scheduler's work is a few percent of a core (one task per station-day
+#: cost 15 % of the 2 cores of the bench machine).
+BATCH = 16
 _CACHE_DIR = ".overbound"
 
 
@@ -166,7 +170,13 @@ def campaign_client(workers: int | None = None, scheduler: str | None = None):
     # Dask sets MALLOC_TRIM_THRESHOLD_ in its workers by default; glibc then stops adapting its
     # mmap threshold, every partition-sized array is mapped and unmapped, and the counting runs
     # at half speed (measured): unset it for our workers.
-    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+    # All tasks are sent to the workers at once (worker-saturation inf): with the default queue of
+    # about one task per thread, a worker waited for its next task after each (15 % slower).
+    config = {
+        "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
+        "distributed.scheduler.worker-saturation": float("inf"),
+    }
+    with dask.config.set(config):
         cluster = LocalCluster(
             n_workers=n,
             threads_per_worker=1,
@@ -420,6 +430,13 @@ class _Local:
         return value
 
 
+def _batch(task, merge, items) -> _Done:
+    """``task`` on consecutive partitions, one after the other, merged: one Dask task for several
+    partitions, so that the scheduler has fewer to place (its share of the cores is taken from the
+    workers' on a small machine)."""
+    return _merge_done(merge, *(task(*item) for item in items))
+
+
 class _Dask:
     """Tasks run on a ``distributed.Client``; partials merge on the workers in a tree."""
 
@@ -434,16 +451,20 @@ class _Dask:
 
         lock = threading.Lock()
 
-        def done(_future) -> None:  # called in the client's thread as each task ends
-            with lock:
-                progress(1)
+        def ticks(n: int):
+            def tick(_future) -> None:  # called in the client's thread as each task ends
+                with lock:
+                    progress(n)
+
+            return tick
 
         roots = []
         for items in groups:
-            level = [self.client.submit(task, *item, pure=False) for item in items]
+            batches = [items[i : i + BATCH] for i in range(0, len(items), BATCH)]
+            level = [self.client.submit(_batch, task, merge, b, pure=False) for b in batches]
             if progress:
-                for f in level:
-                    f.add_done_callback(done)
+                for f, b in zip(level, batches, strict=True):
+                    f.add_done_callback(ticks(len(b)))
             while len(level) > 1:  # consecutive groups: order kept, ties resolved as in one table
                 level = [
                     self.client.submit(_merge_done, merge, *level[i : i + SPLIT_EVERY], pure=False)
