@@ -279,3 +279,23 @@ def test_counting_only_refuses_to_write_the_pooled_table(dataset: Path, tmp_path
     res = CliRunner().invoke(main, ["analyze", *args])
     assert res.exit_code == 2 and "--counting-only does not read" in res.output
     assert not (tmp_path / "out").exists() and not (tmp_path / "e.parquet").exists()
+
+
+def test_methods_that_would_not_fit_in_memory_are_refused_before_any_work(
+    dataset: Path, tmp_path: Path
+) -> None:
+    """The methods still read the pooled table: a dataset whose table they could not hold is refused
+    up front, naming the options that analyse it by partition; nothing is counted or cached."""
+    from overbound.analysis import METHODS_BYTES_PER_EPOCH, analyze
+    from overbound.io.schema import InputError
+
+    ds = _copy(dataset, tmp_path)
+    table, _ = read_dataset(ds)
+    need = table.height * METHODS_BYTES_PER_EPOCH
+    with pytest.raises(InputError, match="--no-confidence --no-evt --no-parametric"):
+        analyze([ds], confidence=None, memory_limit=need - 1)
+    assert not list(ds.rglob(".overbound"))
+    done = analyze([ds], confidence=None, evt=(), memory_limit=need)  # fits: run
+    assert done.confidence and done.evidence is not None
+    # without the methods, no pooled table and no limit
+    assert analyze([ds], memory_limit=0).evidence is not None

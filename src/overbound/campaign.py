@@ -92,6 +92,7 @@ __all__ = [
     "PartitionFailure",
     "campaign_client",
     "count_campaign",
+    "partitions_in",
     "uncached_partitions",
 ]
 
@@ -254,6 +255,11 @@ def _cut(partition: Partition, window: Window) -> Window:
     day = dt.datetime.combine(partition.date, dt.time())
     cuts = (start is not None and start > day) or (end is not None and end < day + dt.timedelta(days=1))
     return window if cuts else None
+
+
+def partitions_in(dataset: str | Path, time_range: Window = None) -> list[Partition]:
+    """The partitions of ``dataset`` that hold days of ``time_range`` (all without one)."""
+    return [p for p in partitions(dataset) if _overlaps(p, time_range)]
 
 
 def _overlaps(partition: Partition, window: Window) -> bool:
@@ -501,7 +507,7 @@ def count_campaign(
     InputError
         Not a dataset, no partition, or no partition could be read.
     """
-    parts = [p for p in partitions(dataset) if _overlaps(p, time_range)]
+    parts = partitions_in(dataset, time_range)
     if not parts:
         what = "in the time range" if time_range else "(ingest inputs first)"
         raise InputError(str(dataset), f"the dataset has no partition {what}")
@@ -672,7 +678,7 @@ def uncached_partitions(
 ) -> int:
     """How many partitions :func:`count_campaign` would read for pass 1 (its partial not cached):
     the work a cluster would be started for. Reads the cache keys only (no partition)."""
-    parts = [p for p in partitions(dataset) if _overlaps(p, time_range)]
+    parts = partitions_in(dataset, time_range)
     services = tuple(services)
     n = 0
     for name, ps in _by_station(parts).items():
