@@ -24,7 +24,7 @@ use their own threads). ``client=None`` runs every task in this process (small d
 
 Cache
 -----
-Partials are kept beside the data (zlib-compressed pickles written by this package: load only
+Partials are kept beside the data (pickles written by this package, the key first: load only
 datasets you trust, as for any pickle): per partition, ``<partition dir>/.overbound/`` holds its
 pass 1 (``pass1.pkl``), its pass-2 values (``values.pkl``, with the bins they were collected for),
 where pass 2 recounts them its windows (``windows.pkl``), its evidence part (``evidence.pkl``) and
@@ -49,7 +49,6 @@ import hashlib
 import json
 import os
 import pickle
-import zlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -208,14 +207,16 @@ def _services_key(services: tuple[ServiceLevel, ...]) -> str:
 
 def _load_cached(path: Path, key: str | None):
     """The value cached at ``path`` under ``key`` (``None`` if absent, unreadable or another key);
-    with ``key=None``, the key it was stored under."""
+    with ``key=None``, the key it was stored under. The key is the file's first pickle: a stale
+    entry is told without reading its value."""
     try:
-        stored_key, value = pickle.loads(zlib.decompress(path.read_bytes()))
-    except (OSError, ValueError, zlib.error, pickle.UnpicklingError, EOFError):
+        with path.open("rb") as f:
+            stored_key = pickle.load(f)
+            if key is None or stored_key != key:
+                return stored_key if key is None else None
+            return pickle.load(f)
+    except (OSError, ValueError, pickle.UnpicklingError, EOFError):
         return None
-    if key is None:
-        return stored_key
-    return value if stored_key == key else None
 
 
 def _store(path: Path, key: str, value) -> None:
@@ -223,7 +224,9 @@ def _store(path: Path, key: str, value) -> None:
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     with contextlib.suppress(OSError):
         path.parent.mkdir(exist_ok=True)
-        tmp.write_bytes(zlib.compress(pickle.dumps((key, value), protocol=5), 1))
+        with tmp.open("wb") as f:  # not compressed: mostly float arrays, and read back in one go
+            pickle.dump(key, f, protocol=5)
+            pickle.dump(value, f, protocol=5)
         os.replace(tmp, path)
     with contextlib.suppress(OSError):
         tmp.unlink(missing_ok=True)

@@ -593,6 +593,8 @@ def merge_second(*parts: SecondPass) -> SecondPass:
             values[key] = values.get(key, []) + arrays
         for name, pieces in p.evidence.items():
             evidence[name] = evidence.get(name, []) + pieces
+    # one array per key: a station-year's cache then holds a few arrays, not thousands
+    values = {key: [np.concatenate(arrays)] if len(arrays) > 1 else arrays for key, arrays in values.items()}
     return SecondPass(windows, values, evidence)
 
 
@@ -602,28 +604,49 @@ def merge_second(*parts: SecondPass) -> SecondPass:
 
 def _boundary_windows(edges: list[Edge], key: tuple, w: int) -> tuple[int, int, int, int]:
     """``(n, n_fail, n_gap, n_truncated)`` of the windows starting in the last ``w`` slots of each
-    partition, from the end slots of it and of the partitions that follow (gaps between: empty)."""
-    b_last = edges[-1].b
-    n = n_fail = n_gap = n_trunc = 0
-    for i, e in enumerate(edges):
-        lo, hi = max(e.a, e.b - w + 1), e.b + w
-        present = np.zeros(hi - lo + 1, dtype=bool)
-        up = np.zeros(hi - lo + 1, dtype=bool)
-        _put(present, lo, hi, e.b - e.tail_present.size + 1, e.tail_present)
-        _put(up, lo, hi, e.b - e.tail_up[key].size + 1, e.tail_up[key])
-        for f in edges[i + 1 :]:
-            if f.a > hi:
+    partition, from the end slots of it and of the partitions that follow (gaps between: empty).
+
+    All partitions at once: row ``i`` holds the slots ``b_i - w + 1 .. b_i + w`` (its last ``w``
+    and the ``w`` after), filled from its tail and the next partition's head; the few rows that
+    reach a third partition (the next one shorter than the window) are filled one by one."""
+    m = len(edges)
+    a = np.array([e.a for e in edges], dtype=np.int64)
+    b = np.array([e.b for e in edges], dtype=np.int64)
+    lo = b - w + 1  # each row's first slot
+    present = np.zeros((m, 2 * w), dtype=bool)
+    up = np.zeros((m, 2 * w), dtype=bool)
+    for strip, tails, heads in (
+        (present, [e.tail_present for e in edges], [e.head_present for e in edges]),
+        (up, [e.tail_up[key] for e in edges], [e.head_up[key] for e in edges]),
+    ):
+        for i in range(m):  # one row each: a copy of a few slots (no numpy op per slot)
+            t = tails[i][-w:]
+            strip[i, w - t.size : w] = t
+            if i + 1 < m:
+                o = int(a[i + 1] - lo[i])
+                if o < 2 * w:
+                    h = heads[i + 1][: 2 * w - o]
+                    strip[i, o : o + h.size] = h
+    far = np.flatnonzero(a[2:] <= b[:-2] + w)  # rows whose strip reaches the partition after next
+    for i in far:
+        for f in edges[i + 2 :]:
+            if f.a > b[i] + w:
                 break
-            _put(present, lo, hi, f.a, f.head_present)
-            _put(up, lo, hi, f.a, f.head_up[key])
-        starts = np.flatnonzero(up[: e.b - lo + 1])  # strip offsets of available start slots
-        counted = starts[starts + lo + w <= b_last]
-        n_trunc += starts.size - counted.size
-        lost, empty = prefix_counts(~up), prefix_counts(~present)
-        n += counted.size
-        n_fail += int(np.count_nonzero(lost[counted + w + 1] != lost[counted + 1]))
-        n_gap += int(np.count_nonzero(empty[counted + w + 1] != empty[counted + 1]))
-    return n, n_fail, n_gap, n_trunc
+            _put(present[i], int(lo[i]), int(b[i] + w), f.a, f.head_present)
+            _put(up[i], int(lo[i]), int(b[i] + w), f.a, f.head_up[key])
+    slot = lo[:, None] + np.arange(w)  # the start slots: the row's first w
+    start = up[:, :w] & (slot >= a[:, None])
+    counted = start & (slot + w <= b[-1])
+    lost = np.zeros((m, 2 * w + 1), dtype=np.int32)
+    empty = np.zeros((m, 2 * w + 1), dtype=np.int32)
+    np.cumsum(~up, axis=1, out=lost[:, 1:])
+    np.cumsum(~present, axis=1, out=empty[:, 1:])
+    j = np.arange(w)
+    fail = lost[:, j + w + 1] != lost[:, j + 1]  # a slot lost among the w after the start
+    gap = empty[:, j + w + 1] != empty[:, j + 1]
+    n = int(np.count_nonzero(counted))
+    n_trunc = int(np.count_nonzero(start)) - n
+    return n, int(np.count_nonzero(counted & fail)), int(np.count_nonzero(counted & gap)), n_trunc
 
 
 def _put(strip: np.ndarray, lo: int, hi: int, start: int, src: np.ndarray) -> None:

@@ -19,7 +19,6 @@ from typing import Literal
 import numpy as np
 import polars as pl
 import scipy.fft
-import scipy.signal
 
 from overbound.stats.sums import dot
 
