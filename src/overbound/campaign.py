@@ -65,6 +65,7 @@ from overbound.methods.counting_partitions import (
     FirstPass,
     SecondPass,
     SecondPlan,
+    bounds_from_second,
     bounds_plan,
     covers,
     daily_availability,
@@ -595,6 +596,8 @@ class _Run:
         # pass 3: the values of the evidence's accuracy bounds, whose quantile levels follow from
         # the effective sizes of pass 2's evidence parts
         draft = evidence_draft(second, plan, counting, self.services, EVIDENCE_GAP_S)
+        if (found := bounds_from_second(first, plan, second, draft)) is not None:
+            return first, counting, found  # pass 2's values hold the bounds' order statistics
         bounds, levels = bounds_plan(first, draft)
         three = _pass_bounds(self.runner, by_station, keys, bounds, **opts)
         if not self.done(three):

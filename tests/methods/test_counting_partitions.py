@@ -10,7 +10,16 @@ import polars as pl
 import pytest
 
 from overbound.methods.counting import count_kpis
-from overbound.methods.counting_partitions import count_partitioned, daily_availability, evidence_partitioned
+from overbound.methods.counting_partitions import (
+    bounds_from_second,
+    count_partitioned,
+    daily_availability,
+    evidence_draft,
+    evidence_partitioned,
+    merge_second,
+    plan_second,
+    second_pass,
+)
 from overbound.methods.evidence import counted_evidence
 from overbound.services import resolve_services
 from overbound.simulate import SimulationConfig, simulate
@@ -166,3 +175,21 @@ def test_evidence_of_a_long_station_by_partition():
     table = simulate(cfg).table
     assert table.height > 2**18
     check(table)
+
+
+def test_evidence_bounds_from_pass_two_when_its_values_hold_them():
+    """Errors nearly independent: many effective samples, bounds close to the 95th percentile, whose
+    order statistics pass 2 has already collected (no third pass); the evidence is the same."""
+    rng = np.random.default_rng(8)
+    t = np.arange(0, 3 * 86_400.0, 5.0)
+    table = pl.concat([_table(t, "A", rng), _table(t, "B", rng)])
+    parts = [lambda p=p: p for p in station_days(table)]
+    merged, first = count_partitioned(parts, SERVICES)
+    plan = plan_second(first, SERVICES)
+    second = merge_second(
+        *(second_pass(p(), plan, SERVICES, label=str(i), evidence=True) for i, p in enumerate(parts))
+    )
+    draft = evidence_draft(second, plan, merged, SERVICES)
+    found = bounds_from_second(first, plan, second, draft)
+    assert found is not None
+    assert_same(found, counted_evidence(table, count_kpis(table, SERVICES), SERVICES))
