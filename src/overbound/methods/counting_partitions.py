@@ -860,7 +860,6 @@ def count_partitioned(
 # quantile bounds), the same as :func:`~overbound.methods.evidence.counted_evidence` of the table
 
 
-
 def evidence_inputs(plan: SecondPlan) -> dict[str, tuple]:
     """Per station what its evidence parts depend on (:func:`station_evidence_inputs`)."""
     return {name: station_evidence_inputs(plan, name) for name in plan.grids}
