@@ -20,6 +20,19 @@ Dependence, stated per quantity
   default, the independence spacing of Comby et al. 2003); their rate per second of available
   time is bounded by the exact Poisson bounds.
 
+By partition
+------------
+Everything here is computed from :class:`EvidencePart` s, the reduction of a piece of a station's
+epochs (:func:`evidence_part`): the 0/1 series packed 8 to a byte (the effective sizes need the
+whole series of a station: its integrated autocorrelation, by block means beyond 2**18 values),
+the loss, MI, HMI and safety-index events as :class:`Runs` (count, first and last time, and the
+gaps wider than the cluster gap, joined across the pieces' boundaries as the events of one
+table), and which errors exceed the station's 95th percentile (:class:`ErrorsAbove`, known before
+the percentile is). A table is one piece per station; a campaign dataset one per station-day
+(:mod:`overbound.methods.counting_partitions`), with the same result to the last bit. The accuracy
+bounds, quantiles of the errors at levels that follow from the effective sizes, are taken last
+(:class:`EvidenceDraft`): from the table, or by the exact second pass of the partitions.
+
 Stations are taken as independent: their sample sizes and event counts add up. For an SBAS
 network this is optimistic for availability (the stations share the broadcast corrections and
 much of the geometry); the per-station evidence is kept next to the pooled one for that reason.
