@@ -94,6 +94,12 @@ def test_evidence_by_partition_is_cached_and_equals_the_pooled_table(dataset: Pa
     again = count_campaign(ds, SERVICES, evidence=True)
     assert again.n_computed == 0 and again.n_cached == 3 * 21  # each station whole, in 3 passes
     assert_same(again.evidence, expected)
+    # a station's evidence parts are not kept with its merged pass 2: its drafted evidence is;
+    # without it, the station is taken from its partitions' parts
+    drafts = sorted(ds.glob("station=*/.overbound/draft.pkl"))
+    assert len(drafts) == 3
+    drafts[1].unlink()
+    assert_same(count_campaign(ds, SERVICES, evidence=True).evidence, expected)
     part = partitions(ds)[4].path
     os.utime(part, ns=(time.time_ns(), time.time_ns() + 10**9))
     third = count_campaign(ds, SERVICES, evidence=True)

@@ -29,7 +29,9 @@ datasets you trust, as for any pickle): per partition, ``<partition dir>/.overbo
 pass 1 (``pass1.pkl``), its pass-2 values (``values.pkl``, with the bins they were collected for),
 where pass 2 recounts them its windows (``windows.pkl``), its evidence part (``evidence.pkl``) and
 the values of the evidence's bounds (``bounds.pkl``); per station, ``station=ID/.overbound/``
-holds the same merged (``pass1.pkl``, ``pass2.pkl``, ``bounds.pkl``). Each is stored
+holds the same merged (``pass1.pkl``, ``pass2.pkl`` without the evidence parts, ``bounds.pkl``)
+and its drafted evidence (``draft.pkl``: its effective sizes and counted events, a few kB, instead
+of its 0/1 series). Each is stored
 with a key of what it depends on: the overbound version, the partition files' size and
 modification time (partitions are replaced by rename, so a new file has a new time), the
 services, the time window, and for pass 2 the part of the plan it read; stored values hold while
@@ -559,6 +561,22 @@ class _Run:
     n_cached: int = 0
     n_computed: int = 0
 
+    def _draft(self, second: SecondPass, plan: SecondPlan, counting, drafts: dict[str, str]):
+        """The evidence but its bounds: the stations taken whole from the pass-2 cache (no parts)
+        from their cached draft, the others drafted from their parts, and their drafts cached."""
+        done = {}
+        for name, key in drafts.items():
+            if name not in second.evidence:
+                done[name] = _load_cached(_station_cache(self.dataset, name, "draft.pkl"), key)
+                if done[name] is None:
+                    raise RuntimeError(f"station {name}: its cached evidence draft went missing in the run")
+        draft = evidence_draft(second, plan, counting, self.services, EVIDENCE_GAP_S, done)
+        for name in second.evidence:
+            if self.cache and name in drafts:
+                value = (draft.stations[name], draft.partials[name])
+                _store(_station_cache(self.dataset, name, "draft.pkl"), drafts[name], value)
+        return draft
+
     def done(self, d: _Done) -> bool:
         """Count a pass's outcome; whether no partition failed in it."""
         self.failures += d.failures
@@ -586,16 +604,18 @@ class _Run:
         read = {label for st in first.stations.values() for label in st.labels}  # not failed, not empty
         by_station = {n: [p for p in ps if p.key in read] for n, ps in by_station.items()}
         by_station = {n: ps for n, ps in by_station.items() if ps}
-        two = _pass_two(self.runner, by_station, keys, first, plan, self.shared_services, evidence, **opts)
+        keys2 = {n: _key(keys[n], _plan_key(plan, first.stations[n].labels, n)) for n in by_station}
+        drafts = {n: _draft_key(k, self.services) for n, k in keys2.items()} if evidence else None
+        two = _pass_two(self.runner, by_station, keys2, plan, self.shared_services, drafts, **opts)
         if not self.done(two):
             return None
         second: SecondPass = two.partial or SecondPass({}, {})
         counting = finalize(first, second, plan, self.services, histogram_bins=self.bins)
         if not evidence:
             return first, counting, None
+        draft = self._draft(second, plan, counting, drafts)
         # pass 3: the values of the evidence's accuracy bounds, whose quantile levels follow from
         # the effective sizes of pass 2's evidence parts
-        draft = evidence_draft(second, plan, counting, self.services, EVIDENCE_GAP_S)
         if (found := bounds_from_second(first, plan, second, draft)) is not None:
             return first, counting, found  # pass 2's values hold the bounds' order statistics
         bounds, levels = bounds_plan(first, draft)
@@ -625,25 +645,26 @@ def _pass_one(runner, by_station, keys, svc, bins, *, cache, window, progress, d
     )
 
 
-def _pass_two(
-    runner, by_station, keys, first, plan, svc, evidence: bool, *, cache, window, progress, dataset
-) -> _Done:
-    """Pass 2 of the partitions read in pass 1 (with their evidence parts when ``evidence``); a
-    station's cached values hold while they cover the plan's rank bins, its evidence parts while
-    their error ranges hold its percentile bins."""
+def _pass_two(runner, by_station, keys, plan, svc, drafts, *, cache, window, progress, dataset) -> _Done:
+    """Pass 2 of the partitions read in pass 1, ``keys`` being each station's pass-2 key; with
+    ``drafts`` (the key of each station's drafted evidence, :func:`_draft_key`) their evidence
+    parts too. A station's cached values hold while they cover the plan's rank bins. Its evidence
+    parts are not kept with them: a station is taken from the cache only with its cached draft,
+    and otherwise from its partitions, whose parts hold while their error ranges hold its
+    percentile bins."""
     shared_plan = runner.share(plan)
+    evidence = drafts is not None
 
     def holds(name: str, stored) -> bool:
         if not covers(stored[0], plan, (name, "")):
             return False
-        parts = stored[-1].evidence.get(name)
-        return not evidence or (parts is not None and _parts_hold(parts, plan, name))
+        return not evidence or _cached_key(_station_cache(dataset, name, "draft.pkl")) == drafts[name]
 
     return _stations_pass(
         runner,
         by_station,
         "pass2.pkl",
-        lambda name: _key(keys[name], _plan_key(plan, first.stations[name].labels, name)),
+        keys.__getitem__,
         lambda name, ps: [(p, shared_plan, svc, cache, _cut(p, window), evidence) for p in ps],
         _second_task,
         merge_second,
@@ -651,8 +672,14 @@ def _pass_two(
         _ticks(progress, "pass 2", sum(map(len, by_station.values()))),
         dataset,
         check=holds,
-        wrap=lambda name, partial: (station_targets(plan, name), partial),
+        wrap=lambda name, partial: (station_targets(plan, name), dataclasses.replace(partial, evidence={})),
     )
+
+
+def _draft_key(pass2_key: str, services) -> str:
+    """What a station's drafted evidence depends on: its pass 2 (its data and plan), the services
+    and the cluster gap."""
+    return _key(pass2_key, _services_key(tuple(services)), EVIDENCE_GAP_S, "draft")
 
 
 def _pass_bounds(runner, by_station, keys, plan, *, cache, window, progress, dataset) -> _Done:

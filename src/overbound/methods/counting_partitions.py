@@ -925,11 +925,21 @@ def finish_evidence(
 
 
 def evidence_draft(
-    second: SecondPass, plan: SecondPlan, counting: CountingResult, services, gap_s: float = 360.0
+    second: SecondPass,
+    plan: SecondPlan,
+    counting: CountingResult,
+    services,
+    gap_s: float = 360.0,
+    done: Mapping[str, tuple] | None = None,
 ) -> EvidenceDraft:
-    """The evidence but its accuracy bounds, from the evidence parts of pass 2."""
-    intervals = {n: station_evidence_inputs(plan, n)[0] for n in second.evidence}
-    return draft_evidence(second.evidence, intervals, counting, services, gap_s=gap_s)
+    """The evidence but its accuracy bounds, from the evidence parts of pass 2 (and the stations
+    ``done`` already, see :func:`~overbound.methods.evidence.draft_evidence`), stations in the
+    counting's order."""
+    done = done or {}
+    names = [n for n in counting.stations if n in second.evidence or n in done] or list(second.evidence)
+    parts = {n: second.evidence.get(n, []) for n in names}
+    intervals = {n: station_evidence_inputs(plan, n)[0] for n in names}
+    return draft_evidence(parts, intervals, counting, services, gap_s=gap_s, done=done)
 
 
 def evidence_partitioned(

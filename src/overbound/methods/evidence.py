@@ -43,7 +43,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import NamedTuple
 
 import numpy as np
@@ -646,12 +646,15 @@ class EvidenceDraft:
 
     ``accuracy`` per ``(scope, axis)`` (scope: a station, or ``""`` for the pooled stations when
     there are several): errors counted, effective size, and the 95th percentile counted.
+    ``partials``: what each station adds to the pooled evidence (with its entry of ``stations``,
+    all a re-analysis needs of a station whose data did not change: ``draft_evidence(done=)``).
     """
 
     stations: dict[str, StationEvidence]
     pooled: StationEvidence | None
     accuracy: dict[tuple[str, str], tuple[int, float, float | None]]
     confidence: float
+    partials: dict[str, dict] = field(default_factory=dict)
 
     def levels(self) -> dict[tuple[str, str], tuple[float, float]]:
         """The quantile levels (0-1) of the bounds of each ``(scope, axis)`` with errors: the
@@ -695,25 +698,31 @@ def draft_evidence(
     gap_s: float = 360.0,
     fallback_s: float = 3600.0,
     confidence: float = 0.95,
+    done: Mapping[str, tuple[StationEvidence, dict]] | None = None,
 ) -> EvidenceDraft:
     """The :class:`EvidenceDraft` of stations given as their pieces in time order (stations in
-    table order), with their nominal intervals (s)."""
+    table order, ``parts`` holding all), with their nominal intervals (s). ``done``: stations
+    already drafted (their ``stations`` entry and ``partials``, from an earlier draft of the same
+    data and options), whose pieces are not needed (empty)."""
     stations, partials, accuracy = {}, {}, {}
+    done = done or {}
     for name, ps in parts.items():
         c = counting.by_station.get(name, counting)
-        stations[name], partials[name] = _station(
-            name, ps, intervals[name], c, services, gap_s, fallback_s, confidence
-        )
+        if name in done:
+            stations[name], partials[name] = done[name]
+        else:
+            stations[name], partials[name] = _station(
+                name, ps, intervals[name], c, services, gap_s, fallback_s, confidence
+            )
         for a in _AXES:
             accuracy[(name, a)] = (*partials[name][("accuracy", a)], _q95(c, a))
     if len(stations) == 1:
-        return EvidenceDraft(stations, None, accuracy, confidence)
+        return EvidenceDraft(stations, None, accuracy, confidence, partials)
     for a in _AXES:
         xs = [partials[n][("accuracy", a)] for n in stations]
         accuracy[("", a)] = (sum(v[0] for v in xs), sum(v[1] for v in xs), _q95(counting, a))
-    return EvidenceDraft(
-        stations, _pool(stations, partials, counting, services, gap_s, confidence), accuracy, confidence
-    )
+    pooled = _pool(stations, partials, counting, services, gap_s, confidence)
+    return EvidenceDraft(stations, pooled, accuracy, confidence, partials)
 
 
 def _q95(counting: CountingResult, axis: str) -> float | None:
