@@ -86,7 +86,7 @@ from overbound.methods.counting_partitions import (
     station_targets,
     windows_plan,
 )
-from overbound.methods.evidence import Evidence, EvidencePart
+from overbound.methods.evidence import GAP_S, Evidence, EvidencePart
 from overbound.services import ServiceLevel
 
 __all__ = [
@@ -348,24 +348,20 @@ def _second_task(
     return _Done(SecondPass(windows, values, parts), cached=cached, computed=computed)
 
 
-#: Runs declustering gap of the evidence's MI, HMI and safety-index clusters (s).
-EVIDENCE_GAP_S = 360.0
-
-
 def _evidence_part(partition: Partition, plan: SecondPlan, services, use_cache: bool, window: Window, table):
     """A partition's evidence part (``None``: no epoch), whether it came from the cache, and the
     table if it was read. A stored part holds while its error ranges hold the station's new
     percentile bins."""
     station = partition.station
     interval_s, ranges = station_evidence_inputs(plan, station)
-    key = _key(_file_key(partition.path), window, _services_key(services), interval_s, EVIDENCE_GAP_S)
+    key = _key(_file_key(partition.path), window, _services_key(services), interval_s, GAP_S)
     path = _partition_cache(partition, "evidence.pkl")
     stored = _load_cached(path, key) if use_cache else None
     if stored is not None and _parts_hold([p for p in stored if p is not None], plan, station):
         return stored[0], True, table
     if table is None:
         table = _read(partition, window)
-    part = None if table.is_empty() else part_of(table, services, (interval_s, ranges), EVIDENCE_GAP_S)
+    part = None if table.is_empty() else part_of(table, services, (interval_s, ranges), GAP_S)
     if use_cache:
         _store(path, key, [part])
     return part, False, table
@@ -570,7 +566,7 @@ class _Run:
                 done[name] = _load_cached(_station_cache(self.dataset, name, "draft.pkl"), key)
                 if done[name] is None:
                     raise RuntimeError(f"station {name}: its cached evidence draft went missing in the run")
-        draft = evidence_draft(second, plan, counting, self.services, EVIDENCE_GAP_S, done)
+        draft = evidence_draft(second, plan, counting, self.services, GAP_S, done)
         for name in second.evidence:
             if self.cache and name in drafts:
                 value = (draft.stations[name], draft.partials[name])
@@ -679,7 +675,7 @@ def _pass_two(runner, by_station, keys, plan, svc, drafts, *, cache, window, pro
 def _draft_key(pass2_key: str, services) -> str:
     """What a station's drafted evidence depends on: its pass 2 (its data and plan), the services
     and the cluster gap."""
-    return _key(pass2_key, _services_key(tuple(services)), EVIDENCE_GAP_S, "draft")
+    return _key(pass2_key, _services_key(tuple(services)), GAP_S, "draft")
 
 
 def _pass_bounds(runner, by_station, keys, plan, *, cache, window, progress, dataset) -> _Done:

@@ -67,7 +67,14 @@ from overbound.methods.counting import (
     sum_continuity,
     window_slots,
 )
-from overbound.methods.evidence import Evidence, EvidenceDraft, EvidencePart, draft_evidence, evidence_part
+from overbound.methods.evidence import (
+    GAP_S,
+    Evidence,
+    EvidenceDraft,
+    EvidencePart,
+    draft_evidence,
+    evidence_part,
+)
 from overbound.services import ServiceLevel
 from overbound.stats.dependence import interval_from_steps, prefix_counts, step_counts
 from overbound.stats.mergeable import (
@@ -359,6 +366,14 @@ class SecondPlan:
     below: dict[tuple[str, str, float], tuple[np.ndarray, int]]
 
 
+def _ranks(
+    counts: BinCounts, qs: Iterable[float], scale: float = 100.0
+) -> dict[float, tuple[np.ndarray, int]]:
+    """Per percentile ``q`` (``scale=1``: quantile) of ``qs``, the bins of its order statistics
+    and the values below them (:func:`~overbound.stats.mergeable.rank_bins`)."""
+    return {q: rank_bins(counts, q, scale=scale) for q in qs}
+
+
 def _scopes(first: FirstPass) -> dict[str, dict[str, BinCounts]]:
     scopes = {name: st.bins for name, st in first.stations.items()}
     if len(scopes) > 1:
@@ -395,13 +410,12 @@ def plan_second(first: FirstPass, services: Sequence[ServiceLevel]) -> SecondPla
         for var, qs in PERCENTILES.items():
             if bins[var].n == 0:
                 continue
-            found = []
-            for q in qs:
-                b, n_below = rank_bins(bins[var], q)
-                found.append(b)
-                below[(scope, var, q)] = (b, n_below)
+            ranks = _ranks(bins[var], qs)
+            below.update({(scope, var, q): r for q, r in ranks.items()})
             margin = ERROR_MARGIN_BINS if var in ERROR_VARIABLE.values() else MARGIN_BINS
-            targets[(scope, var)] = _widened(bins[var].bins, np.concatenate(found), margin)
+            targets[(scope, var)] = _widened(
+                bins[var].bins, np.concatenate([r[0] for r in ranks.values()]), margin
+            )
     return SecondPlan(grids, slots, frozenset(drop), frozenset(redo), targets, below)
 
 
@@ -443,13 +457,11 @@ def quantile_plan(first: FirstPass, levels: Mapping[tuple[str, str], Sequence[fl
     scopes = _scopes(first)
     targets, below = {}, {}
     for (scope, var), qs in levels.items():
-        bins = scopes[scope][var]
-        found = []
-        for q in qs:
-            b, n_below = rank_bins(bins, q, scale=1)
-            found.append(b)
-            below[(scope, var, q)] = (b, n_below)
-        targets[(scope, var)] = _widened(bins.bins, np.concatenate(found))
+        ranks = _ranks(scopes[scope][var], qs, scale=1)
+        below.update({(scope, var, q): r for q, r in ranks.items()})
+        targets[(scope, var)] = _widened(
+            scopes[scope][var].bins, np.concatenate([r[0] for r in ranks.values()])
+        )
     return SecondPlan({}, {}, frozenset(), frozenset(), targets, below)
 
 
@@ -489,7 +501,7 @@ def second_pass(
     *,
     label: str = "",
     evidence: bool = False,
-    gap_s: float = 360.0,
+    gap_s: float = GAP_S,
 ) -> SecondPass:
     """Pass 2 on one partition (the same table and label as its :func:`first_pass`): its values
     (:func:`second_values`), its windows when its label is in ``plan.redo``, and with ``evidence``
@@ -500,7 +512,7 @@ def second_pass(
     parts = {}
     if evidence:
         name = _station_of(table)
-        parts = {name: [part_of(table, services, evidence_inputs(plan)[name], gap_s)]}
+        parts = {name: [part_of(table, services, station_evidence_inputs(plan, name), gap_s)]}
     return SecondPass(windows, second_values(table, plan), parts)
 
 
@@ -860,11 +872,6 @@ def count_partitioned(
 # quantile bounds), the same as :func:`~overbound.methods.evidence.counted_evidence` of the table
 
 
-def evidence_inputs(plan: SecondPlan) -> dict[str, tuple]:
-    """Per station what its evidence parts depend on (:func:`station_evidence_inputs`)."""
-    return {name: station_evidence_inputs(plan, name) for name in plan.grids}
-
-
 def station_evidence_inputs(plan: SecondPlan, station: str) -> tuple:
     """``(interval_s, ((axis, (lo, hi)), ...))``: the station's nominal interval and per axis the
     range of values its 95th percentile of the error lies in, that of its pass-2 target bins (the
@@ -887,31 +894,35 @@ def percentile_range(plan: SecondPlan, station: str, axis: str) -> tuple[float, 
 def part_of(
     table: pl.DataFrame, services: Sequence[ServiceLevel], station: tuple, gap_s: float
 ) -> EvidencePart:
-    """Pass 3 on one partition: its evidence part (``station`` from :func:`evidence_inputs`)."""
+    """Pass 2's evidence part of one partition (``station`` from :func:`station_evidence_inputs`)."""
     interval_s, q95 = station
     return evidence_part(epoch_arrays(table), services, interval_s, dict(q95), gap_s)
 
 
 def bounds_plan(first: FirstPass, draft: EvidenceDraft) -> tuple[SecondPlan, dict]:
     """The plan of pass 3 (:func:`quantile_plan`) and the quantile levels it collects."""
-    levels = {(scope, ERROR_VARIABLE[a]): lv for (scope, a), lv in draft.levels().items()}
+    levels = _bound_levels(draft)
     return quantile_plan(first, levels), levels
+
+
+def _bound_levels(draft: EvidenceDraft) -> dict[tuple[str, str], tuple[float, float]]:
+    """The quantile levels of the accuracy bounds per ``(scope, percentile variable)``."""
+    return {(scope, ERROR_VARIABLE[a]): lv for (scope, a), lv in draft.levels().items()}
 
 
 def bounds_from_second(first: FirstPass, plan: SecondPlan, second: SecondPass, draft: EvidenceDraft):
     """The evidence from pass 2 alone when its values hold the bins of every order statistic of
     the accuracy bounds (long campaigns: the bounds are close to the 95th percentile); ``None``
     when some are outside them (pass 3 collects them then)."""
-    levels = {(scope, ERROR_VARIABLE[a]): lv for (scope, a), lv in draft.levels().items()}
+    levels = _bound_levels(draft)
     scopes = _scopes(first)
     below = {}
     for (scope, var), qs in levels.items():
         have = set(plan.targets.get((scope, var), np.empty(0, np.uint64)).tolist())
-        for q in qs:
-            rank, n_below = rank_bins(scopes[scope][var], q, scale=1)
-            if not have.issuperset(rank.tolist()):
-                return None
-            below[(scope, var, q)] = (rank, n_below)
+        ranks = _ranks(scopes[scope][var], qs, scale=1)
+        if not all(have.issuperset(rank.tolist()) for rank, _ in ranks.values()):
+            return None
+        below.update({(scope, var, q): r for q, r in ranks.items()})
     bounds = SecondPlan({}, {}, frozenset(), frozenset(), plan.targets, below)
     return finish_evidence(first, draft, bounds, levels, second)
 
@@ -929,7 +940,7 @@ def evidence_draft(
     plan: SecondPlan,
     counting: CountingResult,
     services,
-    gap_s: float = 360.0,
+    gap_s: float = GAP_S,
     done: Mapping[str, tuple] | None = None,
 ) -> EvidenceDraft:
     """The evidence but its accuracy bounds, from the evidence parts of pass 2 (and the stations
@@ -948,7 +959,7 @@ def evidence_partitioned(
     first: FirstPass,
     counting: CountingResult,
     *,
-    gap_s: float = 360.0,
+    gap_s: float = GAP_S,
 ) -> Evidence:
     """:func:`~overbound.methods.evidence.counted_evidence` of the pooled table, from the same
     ``partitions`` as :func:`count_partitioned` (its merged pass 1 and result), in this process:

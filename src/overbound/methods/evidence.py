@@ -62,6 +62,7 @@ from overbound.stats.dependence import nominal_interval_us
 from overbound.stats.proportion import Bounds, clopper_pearson, integrated_autocorrelation
 
 __all__ = [
+    "GAP_S",
     "SI_LEVELS",
     "CountedAvailability",
     "CountedContinuity",
@@ -79,6 +80,9 @@ __all__ = [
     "evidence_part",
 ]
 
+#: Runs declustering gap of the MI, HMI and safety-index clusters (s): the independence spacing of
+#: Comby et al. 2003.
+GAP_S = 360.0
 #: Safety-index levels at which the tail models' predictions are checked against the counts.
 SI_LEVELS = (0.3, 0.5, 0.7)
 _AXES = ("horizontal", "vertical")
@@ -381,7 +385,7 @@ def evidence_part(
     services: Sequence[ServiceLevel],
     interval_s: float | None,
     q95: Mapping[str, tuple[float, float]],
-    gap_s: float = 360.0,
+    gap_s: float = GAP_S,
 ) -> EvidencePart:
     """The :class:`EvidencePart` of one station's epochs ``x`` (or a piece of them, in time order).
 
@@ -695,7 +699,7 @@ def draft_evidence(
     counting: CountingResult,
     services: Sequence[ServiceLevel],
     *,
-    gap_s: float = 360.0,
+    gap_s: float = GAP_S,
     fallback_s: float = 3600.0,
     confidence: float = 0.95,
     done: Mapping[str, tuple[StationEvidence, dict]] | None = None,
@@ -734,7 +738,7 @@ def counted_evidence(
     counting: CountingResult,
     services: Sequence[ServiceLevel],
     *,
-    gap_s: float = 360.0,
+    gap_s: float = GAP_S,
     fallback_s: float = 3600.0,
     confidence: float = 0.95,
 ) -> Evidence:
