@@ -717,9 +717,9 @@ def _no_verdicts() -> str:
         "verdicts",
         "Verdicts",
         '<p class="alarm">Not assessed: this is a counting-only analysis of a campaign dataset. The '
-        "verdicts weigh the counts with the statistical methods and the counted evidence, which read "
-        "the pooled epoch table; run <code>overbound analyze</code> without <code>--counting-only</code>"
-        " for them.</p>",
+        "verdicts weigh the counts with the counted evidence (by partition too) and the statistical "
+        "methods; run <code>overbound analyze</code> without <code>--counting-only</code> for them "
+        "(with <code>--no-confidence --no-evt --no-parametric</code>, nothing is read whole).</p>",
     )
 
 
@@ -728,7 +728,8 @@ def _time_series(a: Analysis) -> str:
         return _section(
             "time-series",
             "Time series",
-            "<p>Not drawn: a counting-only campaign analysis does not read the pooled epoch table.</p>",
+            "<p>Not drawn: a campaign analysed by partition without the statistical methods (or with "
+            "<code>--counting-only</code>) does not read the pooled epoch table.</p>",
         )
     series, hists = [], []
     for axis in AXES:
