@@ -241,6 +241,31 @@ def test_verdicts_by_partition_on_a_real_scheduler_equal_one_file(
     assert file_doc["verdicts_by_station"] == ds_doc["verdicts_by_station"]
 
 
+def test_evt_by_partition_on_a_real_scheduler_equals_one_file(
+    dataset: Path, tmp_path: Path, scheduler
+) -> None:
+    """The EVT tail extrapolation reduces the partitions (three passes on the two ``dask worker``
+    processes, no pooled table read): its evt-<axis>.json and the summary, verdicts included, equal
+    those of the same epochs as one file."""
+    from overbound.io.table import write_epochs
+
+    table, _ = read_dataset(dataset)
+    one = tmp_path / "network.parquet"
+    write_epochs(table, one)
+    ds = _copy(dataset, tmp_path)
+    common = ["--no-confidence", "--no-parametric"]
+    file_doc = _analyze([str(one), "-o", str(tmp_path / "file"), *common])
+    ds_doc = _analyze([str(ds), "-o", str(tmp_path / "dataset"), "--scheduler", scheduler, *common])
+    ds_doc.pop("network")
+    assert _numbers(file_doc) == _numbers(ds_doc)
+    for axis in ("vertical", "horizontal"):
+        name = f"evt-{axis}.json"
+        by_file, by_parts = (json.loads((tmp_path / d / name).read_text()) for d in ("file", "dataset"))
+        for doc in (by_file, by_parts):
+            doc.pop("timings", None)
+        assert by_file == by_parts and by_parts["p_mi_95"] is not None
+
+
 def test_counting_only_on_a_real_scheduler_equals_in_process(
     dataset: Path, tmp_path: Path, scheduler
 ) -> None:
@@ -298,10 +323,11 @@ def test_methods_that_would_not_fit_in_memory_are_refused_before_any_work(
     ds = _copy(dataset, tmp_path)
     table, _ = read_dataset(ds)
     need = table.height * METHODS_BYTES_PER_EPOCH
-    with pytest.raises(InputError, match="--no-confidence --no-evt --no-parametric"):
+    with pytest.raises(InputError, match="--no-confidence --no-parametric"):
         analyze([ds], confidence=None, memory_limit=need - 1)
     assert not list(ds.rglob(".overbound"))
     done = analyze([ds], confidence=None, evt=(), memory_limit=need)  # fits: run
     assert done.confidence and done.evidence is not None
-    # without the methods, no pooled table and no limit
+    # without the methods that read it (the EVT reduces the partitions), no pooled table and no limit
     assert analyze([ds], memory_limit=0).evidence is not None
+    assert analyze([ds], evt=None, evt_n_boot=20, memory_limit=0).evt

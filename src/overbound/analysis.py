@@ -237,13 +237,13 @@ class _Methods:
     @property
     def none(self) -> bool:
         """No method asked: the counting and its evidence only."""
-        return (
-            self.confidence is not None
-            and not self.confidence
-            and self.evt is not None
-            and not self.evt
-            and not self.parametric
-        )
+        return not self.needs_table and self.evt is not None and not self.evt
+
+    @property
+    def needs_table(self) -> bool:
+        """A method that still reads the pooled table of a dataset is asked (the PL confidence
+        level, the parametric analysis); the EVT reduces the partitions."""
+        return self.confidence is None or bool(self.confidence) or self.parametric
 
 
 def _with_methods(
@@ -256,9 +256,10 @@ def _with_methods(
     progress: Callable[[str], None] | None,
     network: CampaignCounting | None = None,
     evidence: Evidence | None = None,
+    evt_done: tuple[tuple[TailAnalysis, ...], tuple[tuple[str, str], ...]] | None = None,
 ) -> Analysis:
     """The analysis of ``table`` with its ``counting`` done: the evidence (unless given) and the
-    methods asked."""
+    methods asked (the EVT's results when given: a dataset's, by partition)."""
     if evidence is None:
         evidence = counted_evidence(table, counting, levels)
     confidence, evt, parametric = methods.confidence, methods.evt, methods.parametric
@@ -269,8 +270,10 @@ def _with_methods(
     cl = tuple(
         c for a in axes if (c := _guarded(failures, "confidence", a, confidence_analysis, table, axis=a))
     )
-    evt_axes = _evt_axes(table) if evt is None else tuple(dict.fromkeys(evt))
-    done, failed = _run_evt(table, evt_axes, levels, methods.evt_n_boot, methods.evt_seed, progress)
+    if evt_done is None:
+        evt_axes = _evt_axes(table) if evt is None else tuple(dict.fromkeys(evt))
+        evt_done = _run_evt(table, evt_axes, levels, methods.evt_n_boot, methods.evt_seed, progress)
+    done, failed = evt_done
     par = None
     if parametric:
         from overbound.methods.parametric import parametric_analysis
@@ -313,7 +316,7 @@ def _analyze_campaign(
         if progress:
             progress(f"counting KPIs, {stage}: {done}/{total} station-days")
 
-    if not (counting_only or methods.none):
+    if not counting_only and methods.needs_table:
         _check_methods_memory(dataset, time_range, memory_limit)
     network = count_campaign(
         dataset,
@@ -326,16 +329,93 @@ def _analyze_campaign(
     )
     report = _campaign_report(dataset, network)
     label = title or dataset.name
-    if counting_only or methods.none:  # nothing reads the pooled table
-        empty = pl.DataFrame()
+    evt_done = None
+    if not counting_only:
+        evt_done = _campaign_evt(dataset, network, levels, methods, client, time_range, progress)
+    if counting_only or not methods.needs_table:  # nothing reads the pooled table
+        done, failed = evt_done or ((), ())
         return Analysis(
-            empty, (report,), levels, network.counting, label, evidence=network.evidence, network=network
+            pl.DataFrame(),
+            (report,),
+            levels,
+            network.counting,
+            label,
+            evt=done,
+            evt_failures=failed,
+            evidence=network.evidence,
+            network=network,
         )
     table, _ = read_dataset(dataset, columns=columns, skip={f.key for f in network.failures})
     table = validate_epochs(table if time_range is None else filter_time(table, time_range), str(dataset))
     return _with_methods(
-        table, (report,), levels, network.counting, label, methods, progress, network, network.evidence
+        table,
+        (report,),
+        levels,
+        network.counting,
+        label,
+        methods,
+        progress,
+        network,
+        network.evidence,
+        evt_done,
     )
+
+
+def _campaign_evt(
+    dataset: Path,
+    network: CampaignCounting,
+    levels: tuple[ServiceLevel, ...],
+    methods: _Methods,
+    client,
+    time_range,
+    progress: Callable[[str], None] | None,
+) -> tuple[tuple[TailAnalysis, ...], tuple[tuple[str, str], ...]]:
+    """The EVT of each axis asked, from the partitions the counting read (its three passes of
+    :mod:`overbound.campaign_tail`): as :func:`_run_evt` of the pooled table."""
+    from overbound.campaign_tail import NO_SOLUTION, campaign_tail_data
+    from overbound.methods.tail_extrapolation import tail_analysis_of, tail_filters
+
+    asked = ("vertical", "horizontal") if methods.evt is None else tuple(dict.fromkeys(methods.evt))
+    if not asked:
+        return (), ()
+    failed_keys = {f.key for f in network.failures}
+    parts = [p for p in partitions_in(dataset, time_range) if p.key not in failed_keys]
+    specs = {a: tuple(_service_spec(s) for s in levels if s.alert_limit(a) is not None) for a in asked}
+
+    def tick(stage: str, done: int, total: int) -> None:
+        if progress:
+            progress(f"EVT tail extrapolation, {stage}: {done}/{total}")
+
+    inputs = campaign_tail_data(
+        parts,
+        {a: tail_filters(a, specs[a]) for a in asked},
+        client=client,
+        time_range=time_range,
+        progress=tick,
+    )
+    done, failed = [], []
+    for axis in asked:
+        if axis not in inputs.data:
+            why = inputs.failed[axis]
+            # as _evt_axes: with the axes chosen automatically, a horizontal without a solution is left out
+            if not (methods.evt is None and axis == "horizontal" and why == NO_SOLUTION):
+                failed.append((axis, why))
+            continue
+        if progress:
+            progress(f"EVT tail extrapolation, {axis}")
+        try:
+            done.append(
+                tail_analysis_of(
+                    inputs.data[axis],
+                    axis=axis,
+                    services=specs[axis],
+                    n_boot=methods.evt_n_boot,
+                    rng=methods.evt_seed,
+                )
+            )
+        except ValueError as exc:  # InputError too: too few tail values
+            failed.append((axis, str(exc)))
+    return tuple(done), tuple(failed)
 
 
 #: Memory the default methods take per epoch of the pooled table they read (measured: 7.5 GB at the
@@ -356,9 +436,10 @@ def _check_methods_memory(dataset: Path, time_range, limit: int | None) -> None:
     if need > limit:
         raise InputError(
             str(dataset),
-            f"the PL confidence level, EVT and parametric methods still read the pooled table: {n:,} "
+            f"the PL confidence level and the parametric analysis still read the pooled table: {n:,} "
             f"epochs, about {need / 1e9:.1f} GB, more than the {limit / 1e9:.1f} GB available; run with "
-            "--no-confidence --no-evt --no-parametric (the KPIs and verdicts, by partition) or on a "
+            "--no-confidence --no-parametric (the KPIs, the verdicts and the EVT tail extrapolation, by "
+            "partition) or on a "
             "shorter span (--start/--end)",
         )
 

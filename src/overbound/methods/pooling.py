@@ -14,8 +14,9 @@ import numpy as np
 import polars as pl
 
 from overbound.io.schema import InputError, as_numpy
+from overbound.stats.dependence import interval_from_steps, step_counts
 
-__all__ = ["PE_PL", "PooledEpochs", "pool_epochs"]
+__all__ = ["PE_PL", "PooledEpochs", "pool_epochs", "pooled_offsets"]
 
 #: Position-error and protection-level columns of each axis.
 PE_PL = {"vertical": ("vpe", "vpl"), "horizontal": ("hpe", "hpl")}
@@ -53,17 +54,20 @@ class PooledEpochs:
 
 
 def _interval_us(t: np.ndarray, codes: np.ndarray) -> int:
-    """Mean of the spacings within 25 % of the median spacing (gaps out, jitter averaged).
-
-    The median only sets the ±25 % window, so it is taken over at most ~1e5 evenly strided spacings
-    (months of 1 Hz data hold millions); the mean is over all spacings in the window.
-    """
+    """The nominal interval of the pooled series: :func:`~overbound.stats.dependence.nominal_interval_us`'s
+    rule (the mean of the steps within 25 % of their median) over the steps within each station,
+    from their value counts, so that a series read a station-day at a time has the same."""
     steps = np.diff(t)[np.diff(codes) == 0]
-    steps = steps[steps > 0]
-    stride = max(1, steps.size // 100_000)
-    med = float(np.median(steps[::stride])) if steps.size else 1e6
-    near = steps[np.abs(steps - med) <= med / 4] if steps.size else steps
-    return max(1, round(float(near.mean()))) if near.size else max(1, round(med))
+    return interval_from_steps(*step_counts(steps)) or 1_000_000
+
+
+def pooled_offsets(first: np.ndarray, last: np.ndarray, dt: int) -> np.ndarray:
+    """Where each station starts on the pooled axis (µs), from the first and last times of its
+    solution epochs, in pooled order: the stations one after the other, each span rounded up to a
+    whole number of intervals ``dt`` and followed by a day (also a whole number of intervals)."""
+    span = np.asarray(last, dtype=np.int64) - np.asarray(first, dtype=np.int64)
+    gap = ((_DAY_US + dt - 1) // dt) * dt
+    return np.concatenate([[0], np.cumsum(((span + dt - 1) // dt) * dt + gap)[:-1]]).astype(np.int64)
 
 
 def _station_codes(station: pl.Series) -> np.ndarray:
@@ -118,9 +122,7 @@ def pool_epochs(table: pl.DataFrame, axis: str, *, signed: bool = False) -> Pool
     dt = _interval_us(t, codes)
     first = np.flatnonzero(np.concatenate([[True], np.diff(codes) != 0]))
     last = np.concatenate([first[1:], [t.size]]) - 1
-    span = t[last] - t[first]
-    gap = ((_DAY_US + dt - 1) // dt) * dt
-    offs = np.concatenate([[0], np.cumsum(((span + dt - 1) // dt) * dt + gap)[:-1]])
+    offs = pooled_offsets(t[first], t[last], dt)
     rep = np.repeat(np.arange(first.size), last - first + 1)
     pooled = t - t[first][rep] + offs[rep]
     day = t // _DAY_US

@@ -16,6 +16,7 @@ coverage of the P_MI interval and conservativeness of P_MI95 over 200 seeded cam
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 import warnings
@@ -26,7 +27,16 @@ import polars as pl
 
 from overbound.io.schema import InputError
 from overbound.jsontext import dumps
-from overbound.methods.pooling import PooledEpochs, pool_epochs
+from overbound.methods.pooling import PE_PL, PooledEpochs, pool_epochs
+from overbound.methods.tail_partitions import (
+    ACF_MAX_LAG_S,
+    DEPENDENCE_QUANTILE,
+    SI_LEVELS,
+    Filter,
+    TailData,
+    krs_spacing,
+    table_tail_data,
+)
 from overbound.services import K_H_PA, K_V_PA, SERVICES, ServiceLevel, parse_service
 from overbound.stats.bootstrap import (
     bca_ci,
@@ -38,14 +48,11 @@ from overbound.stats.bootstrap import (
 )
 from overbound.stats.dependence import (
     Clusters,
-    autocorrelation,
     cluster_gap,
     cluster_sizes,
     decluster_runs,
     extremal_index,
     one_over_e_time,
-    regular_series,
-    select_spaced,
     vk_curve,
 )
 from overbound.stats.evt import GEVFit, GPDFit, fit_gev, fit_gpd, gpd_sf, profile_ci_exceedance
@@ -76,15 +83,16 @@ __all__ = [
     "evt_dict",
     "per_approach",
     "tail_analysis",
+    "tail_analysis_of",
+    "tail_filters",
     "write_evt",
 ]
 
 SCHEMA = "overbound.evt/1"
 #: Exposure of one approach (s): the integrity requirement 2e-7 is per approach of 150 s.
 APPROACH_S = 150.0
-#: Quantile of the variable that defines the dependence level :math:`u_0` (V_K curve, clusters) when
-#: the threshold is chosen automatically.
-DEPENDENCE_QUANTILE = 0.99
+# DEPENDENCE_QUANTILE (the quantile of SI that defines the dependence level u_0 when the threshold is
+# chosen automatically) and ACF_MAX_LAG_S (the largest ACF lag) are tail_partitions' (its passes use them)
 #: Candidate thresholds: ``N_CANDIDATES`` cluster maxima at :math:`u_0` that leave ``MAX_TAIL`` down to
 #: ``MIN_TAIL`` cluster maxima above them (geometric steps), kept below 1.
 N_CANDIDATES = 20
@@ -94,8 +102,6 @@ MAX_TAIL = 500
 TOP_CLUSTERS = 30
 #: Fewest block maxima for the GEV bootstrap (below, its optimiser is unstable and the bound meaningless).
 GEV_MIN_BOOT_BLOCKS = 10
-#: Largest ACF lag examined (s).
-ACF_MAX_LAG_S = 3600.0
 #: Lower end of the KRS core range in normalised-error units (small L carry no information).
 KRS_L_MIN = 0.5
 
@@ -490,20 +496,16 @@ def _hmi_keep(d: PooledEpochs, alert_limit: float | None, tta_s: float) -> tuple
     return keep & ~tta, n_alert, n_above, int(tta.sum())
 
 
-def _counts(d: PooledEpochs, n_alert: int, n_above: int, n_tta: int, n_used: int) -> EpochCounts:
-    return EpochCounts(
-        d.n_rows, d.n_no_solution, n_alert, n_above, n_tta, n_used, d.n_stations, d.interval_us / 1e6
-    )
+def _counts(d: TailData, counts: tuple[int, int, int, int]) -> EpochCounts:
+    n_alert, n_above, n_tta, n_used = counts
+    return EpochCounts(d.n_rows, d.n_no_solution, n_alert, n_above, n_tta, n_used, d.n_stations, d.interval_s)
 
 
 def _dependence(
-    t_s: np.ndarray, x: np.ndarray, t_us: np.ndarray, interval_s: float, level: float, gap: float | str
+    te: np.ndarray, acf: np.ndarray, interval_s: float, level: float, gap: float | str
 ) -> Dependence:
-    reg = regular_series(t_us, x, interval_s=interval_s)
-    m = int(min(round(ACF_MAX_LAG_S / interval_s), reg.values.size - 1))
-    acf = autocorrelation(reg.values, max_lag=max(m, 0))
+    """Step 2 from the ACF of the series and the times ``te`` (s) of its exceedances of ``level``."""
     decor = one_over_e_time(acf, interval_s)
-    te = t_s[x > level]
     span = max(10.0 * (decor if math.isfinite(decor) else ACF_MAX_LAG_S), 60.0 * interval_s)
     k = np.linspace(0.0, span, 121)
     curve = vk_curve(te, k_values=k)
@@ -536,6 +538,9 @@ def _tail_fit(
     t_s: np.ndarray,
     x: np.ndarray,
     *,
+    n_total: int,
+    level: float,
+    positions: np.ndarray,
     variable: str,
     interval_s: float,
     gap_s: float,
@@ -548,18 +553,19 @@ def _tail_fit(
     n_sim: int,
     diagnostics: bool = True,
 ) -> TailFit:
-    """Steps 3-6 of :func:`tail_analysis` for one series ``x`` on times ``t_s`` (sorted)."""
+    """Steps 3-6 of :func:`tail_analysis` for one series of ``n_total`` epochs, given by its
+    exceedances of ``level`` (:math:`u_0`): their times ``t_s`` (sorted), values ``x`` and positions
+    in the series. Every statistic of these steps depends on the exceedances of :math:`u_0` and
+    the series' length only. ``threshold``: ``"auto"`` or the given one (then ``level``)."""
     g_sel, g_boot, g_rate = rng.spawn(3)
-    n = x.size
+    up = x > level
+    t_s, x, positions = t_s[up], x[up], positions[up]
+    n = n_total
     auto = threshold == "auto"
-    if auto:
-        level = float(np.quantile(x, DEPENDENCE_QUANTILE))
-    else:
-        level = float(threshold)
-        if not (math.isfinite(level) and level < 1.0):
-            raise ValueError(f"threshold must be 'auto' or a number below 1, got {threshold!r}")
+    if not auto and not (math.isfinite(level) and level < 1.0):
+        raise ValueError(f"threshold must be 'auto' or a number below 1, got {threshold!r}")
     clusters = decluster_runs(t_s, x, threshold=level, run_length=gap_s)
-    pool = clusters.peak_value if decluster else x[x > level]
+    pool = clusters.peak_value if decluster else x
     # candidate grid: thresholds leaving MAX_TAIL down to MIN_TAIL cluster maxima above, below 1
     peaks = np.sort(clusters.peak_value)
     if peaks.size > MIN_TAIL:
@@ -651,7 +657,7 @@ def _tail_fit(
         samples = k_star / n * gb * size_star
         p_bca = bca_ci(samples, p, _jackknife_p(y, u, own, top, n_c, n, size.mean), confidence)
     else:
-        idx = np.flatnonzero(x > u)
+        idx = positions[x > u]
         mb_exc = max(1.0, n_exc / max(n_c, 1))
         boot = bootstrap_gpd(y, n_boot=n_boot, rng=g_boot, method="stationary", mean_block=mb_exc)
         mb = max(n ** (1.0 / 3.0), 2.0 * gap_s / interval_s, 1.0)
@@ -675,7 +681,7 @@ def _tail_fit(
         mean_excess=me,
         stability=stab,
         p_vs_threshold=pvt,
-        clusters=clusters,
+        clusters=dataclasses.replace(clusters, peak_index=positions[clusters.peak_index]),
         cluster_level=level,
         decluster=decluster,
         n_exceedances=n_exc,
@@ -726,10 +732,8 @@ def _try_gev(x: np.ndarray) -> GEVFit | None:
     return f if f.success else None
 
 
-def _gev(d_day: np.ndarray, x: np.ndarray, theta: float, n_boot: int, confidence: float, rng) -> GEVResult:
-    starts = np.flatnonzero(np.concatenate([[True], np.diff(d_day) != 0]))
-    size = np.diff(np.concatenate([starts, [x.size]]))
-    bm = np.maximum.reduceat(x, starts)
+def _gev(bm: np.ndarray, size: np.ndarray, theta: float, n_boot: int, confidence: float, rng) -> GEVResult:
+    """Step 8 from the maximum ``bm`` and the number of analysed epochs ``size`` of each station-day."""
     nb = float(np.median(size))
     bm = bm[size >= 0.5 * nb]
     th = theta if math.isfinite(theta) and theta > 0 else 1.0
@@ -920,38 +924,118 @@ def tail_analysis(
     .. [5] Bader, B., Yan, J., Zhang, X. (2018), Automated threshold selection for extreme value
        analysis via ordered goodness-of-fit tests, Annals of Applied Statistics 12(1), 310-329.
     """
+    svc = parse_service(service) if isinstance(service, str) else service
+    chosen = _chosen_services(svc, services, axis)
+    filters = _filters(svc, chosen, axis)
+    _check_options(confidence, n_boot, threshold)
+    pool_epochs(table.head(0) if table.is_empty() else table.head(1), axis)  # the columns' check
+    if not _has_solution(table, axis):
+        raise InputError("<epoch table>", "no epoch with a solution")
+    level = None if threshold == "auto" else float(threshold)
+    data = table_tail_data(table, axis, filters, level)
+    return tail_analysis_of(
+        data,
+        axis=axis,
+        service=svc,
+        services=services,
+        threshold=threshold,
+        cluster_gap=cluster_gap,
+        decluster=decluster,
+        n_boot=n_boot,
+        confidence=confidence,
+        rng=rng,
+        n_sim=n_sim,
+        gev_boot=gev_boot,
+        diagnostics=diagnostics,
+    )
+
+
+def _has_solution(table: pl.DataFrame, axis: str) -> bool:
+    pe, pl_ = (pl.col(c) for c in PE_PL[axis])
+    ok = pe.is_finite() & pl_.is_finite() & (pl_ > 0)
+    return bool(table.select(ok.any()).item()) if table.height else False
+
+
+def _check_options(confidence: float, n_boot: int, threshold: float | str) -> None:
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"confidence must be in (0, 1), got {confidence}")
     if n_boot < 1:
         raise ValueError(f"n_boot must be >= 1, got {n_boot}")
+    if threshold != "auto":
+        u = float(threshold)
+        if not (math.isfinite(u) and u < 1.0):
+            raise ValueError(f"threshold must be 'auto' or a number below 1, got {threshold!r}")
+
+
+def _chosen_services(
+    svc: ServiceLevel | None, services: tuple[str, ...] | None, axis: str
+) -> tuple[ServiceLevel, ...]:
+    """The services of step 10: those given, else the filtering one, else every built-in level
+    with an alert limit on ``axis``."""
+    if svc is not None and svc.alert_limit(axis) is None:
+        raise ValueError(f"service {svc.name} has no {axis} alert limit")
+    if services is None:
+        return (svc,) if svc is not None else tuple(s for s in SERVICES.values() if s.alert_limit(axis))
+    return tuple(parse_service(s) for s in services)
+
+
+def _filters(svc: ServiceLevel | None, chosen: tuple[ServiceLevel, ...], axis: str) -> tuple[Filter, ...]:
+    """The HMI filters of the main series (``svc``'s, or none) and of each service of step 10."""
+    main: Filter = (svc.alert_limit(axis), svc.tta_s) if svc is not None else (None, 0.0)
+    return (main, *((s.alert_limit(axis), s.tta_s) for s in chosen))
+
+
+def tail_filters(axis: str, services: tuple[str, ...] | None = None) -> tuple[Filter, ...]:
+    """The HMI filters :func:`tail_analysis` reduces its input with (no filtering ``service``):
+    for :func:`~overbound.methods.tail_partitions.tail_first` and the passes of a dataset."""
+    return _filters(None, _chosen_services(None, services, axis), axis)
+
+
+def tail_analysis_of(
+    data: TailData,
+    *,
+    axis: str = "vertical",
+    service: ServiceLevel | None = None,
+    services: tuple[str, ...] | None = None,
+    threshold: float | str = "auto",
+    cluster_gap: float | str = "auto",
+    decluster: bool = True,
+    n_boot: int = 1000,
+    confidence: float = 0.95,
+    rng: np.random.Generator | int | None = 0,
+    n_sim: int = 200,
+    gev_boot: int | None = None,
+    diagnostics: bool = True,
+) -> TailAnalysis:
+    """:func:`tail_analysis` of its reduced input (:mod:`overbound.methods.tail_partitions`, built
+    with the filters of ``service`` and ``services``, :func:`tail_filters` when no ``service``):
+    a table's or a campaign dataset's. The options are :func:`tail_analysis`'s."""
+    _check_options(confidence, n_boot, threshold)
+    chosen = _chosen_services(service, services, axis)
+    if len(chosen) != len(data.services):
+        raise ValueError(f"the input was reduced for {len(data.services)} services, not {len(chosen)}")
     clock: dict[str, float] = {}
     t0 = time.perf_counter()
-    svc = parse_service(service) if isinstance(service, str) else service
     g = _rng(rng)
     seed = rng if isinstance(rng, int) else None
     g_main, g_gev, g_over, g_svc = g.spawn(4)
-    d = pool_epochs(table, axis)
-    al = svc.alert_limit(axis) if svc is not None else None
-    if svc is not None and al is None:
-        raise ValueError(f"service {svc.name} has no {axis} alert limit")
-    keep, n_alert, n_above, n_tta = _hmi_keep(d, al, svc.tta_s if svc else 0.0)
-    n_used = int(keep.sum())
+    n_used = data.counts[3]
     if n_used < 3:
         raise InputError("<epoch table>", f"only {n_used} epochs left to analyse")
-    counts = _counts(d, n_alert, n_above, n_tta, n_used)
-    t_us, pe, pls, day = d.t_us[keep], d.pe[keep], d.pl[keep], d.day[keep]
-    t_s = t_us / 1e6
-    si = pe / pls
+    counts = _counts(data, data.counts)
     dt_s = counts.interval_s
+    level = data.level
     clock["prepare"] = time.perf_counter() - t0
     t1 = time.perf_counter()
-    level = float(np.quantile(si, DEPENDENCE_QUANTILE)) if threshold == "auto" else float(threshold)
-    dep = _dependence(t_s, si, t_us, dt_s, level, cluster_gap)
+    dep = _dependence(data.t_s, data.acf, dt_s, level, cluster_gap)
     clock["dependence"] = time.perf_counter() - t1
     t1 = time.perf_counter()
     tail = _tail_fit(
-        t_s,
-        si,
+        data.t_s,
+        data.x,
+        n_total=n_used,
+        level=level,
+        positions=data.position,
         variable="SI",
         interval_s=dt_s,
         gap_s=dep.cluster_gap_s,
@@ -966,14 +1050,13 @@ def tail_analysis(
     )
     clock["tail"] = time.perf_counter() - t1
     t1 = time.perf_counter()
-    gev = _gev(day, si, tail.extremal_index, n_boot if gev_boot is None else gev_boot, confidence, g_gev)
+    n_gev = n_boot if gev_boot is None else gev_boot
+    gev = _gev(data.block_max, data.block_size, tail.extremal_index, n_gev, confidence, g_gev)
     clock["gev"] = time.perf_counter() - t1
     # overbounding of the normalised error, down-sampled to independent samples
     t1 = time.perf_counter()
     k = _K[axis]
-    spacing = dep.decorrelation_s if math.isfinite(dep.decorrelation_s) else ACF_MAX_LAG_S
-    sel = select_spaced(t_s, anchor=int(np.argmax(si)), spacing=spacing)
-    ell = si[sel] * k
+    ell = data.spaced(krs_spacing(data.acf, dt_s)) * k
     l_tail = tail.threshold * k
     krs = None
     if l_tail > KRS_L_MIN:
@@ -987,31 +1070,26 @@ def tail_analysis(
     clock["overbounding"] = time.perf_counter() - t1
     # HMI per service
     t1 = time.perf_counter()
-    if services is None:
-        chosen = (svc,) if svc is not None else tuple(s for s in SERVICES.values() if s.alert_limit(axis))
-    else:
-        chosen = tuple(parse_service(s) for s in services)
     hmi: dict[str, ServiceHMI] = {}
-    for s, gs in zip(chosen, g_svc.spawn(len(chosen)), strict=True):  # a loop over a few services
+    for s, gs, series in zip(chosen, g_svc.spawn(len(chosen)), data.services, strict=True):
         hmi[s.name] = _service_hmi(
-            d, s, axis, tail.threshold, dep.cluster_gap_s, decluster, n_boot, confidence, gs
+            data, series, s, axis, tail.threshold, dep.cluster_gap_s, decluster, n_boot, confidence, gs
         )
     clock["services"] = time.perf_counter() - t1
     clock["total"] = time.perf_counter() - t0
-    lv = np.array([0.5, 0.9, 0.99, 0.999, 0.9999])
     msg = tail.message or "GPD tail extrapolation to SI = 1"
     return TailAnalysis(
         axis=axis,
-        service=svc.name if svc else None,
+        service=service.name if service else None,
         confidence=confidence,
         n_boot=n_boot,
         seed=seed,
         decluster=decluster,
         counts=counts,
-        si_levels=lv,
-        si_quantiles=np.quantile(si, lv),
-        si_max=float(si.max()),
-        n_mi=int(np.count_nonzero(si > 1.0)),
+        si_levels=np.array(SI_LEVELS),
+        si_quantiles=data.quantiles,
+        si_max=float(data.si_max),
+        n_mi=int(data.n_mi),
         dependence=dep,
         tail=tail,
         gev=gev,
@@ -1024,7 +1102,8 @@ def tail_analysis(
 
 
 def _service_hmi(
-    d: PooledEpochs,
+    data: TailData,
+    series: tuple[np.ndarray, np.ndarray, tuple[int, int, int, int]],
     s: ServiceLevel,
     axis: str,
     threshold: float,
@@ -1034,13 +1113,15 @@ def _service_hmi(
     confidence: float,
     rng: np.random.Generator,
 ) -> ServiceHMI:
-    """Step 10 of :func:`tail_analysis`: the MI extrapolation of the HMI-filtered SI for one service."""
+    """Step 10 of :func:`tail_analysis`: the MI extrapolation of the HMI-filtered SI for one
+    service, from its filter over the main series' exceedances (``series``: which it keeps, their
+    positions among its epochs, its counts)."""
     al = s.alert_limit(axis)
     nan = math.nan
     if al is None:
         raise ValueError(f"service {s.name} has no {axis} alert limit")
-    keep, n_alert, n_above, n_tta = _hmi_keep(d, al, s.tta_s)
-    counts = _counts(d, n_alert, n_above, n_tta, int(keep.sum()))
+    keep, positions, filtered = series
+    counts = _counts(data, filtered)
     dt_s = counts.interval_s
     exposure = s.integrity_exposure_s
     if counts.n_used < 3:
@@ -1048,8 +1129,11 @@ def _service_hmi(
         return ServiceHMI(s, al, counts, None, nan, nan, exposure, nan, nan, s.integrity_risk, None, msg)
     try:
         tail = _tail_fit(
-            d.t_us[keep] / 1e6,
-            d.pe[keep] / d.pl[keep],
+            data.t_s[keep],
+            data.x[keep],
+            n_total=counts.n_used,
+            level=threshold,
+            positions=positions,
             variable="SI",
             interval_s=dt_s,
             gap_s=gap_s,

@@ -1,0 +1,238 @@
+"""The EVT tail extrapolation of a campaign dataset, partition by partition.
+
+The three passes of :mod:`overbound.methods.tail_partitions` over the partitions a counting read
+(:func:`overbound.campaign.count_campaign`), on the same runner (Dask or this process): memory per
+task is a partition and the one before it; the driver holds the reduced input (about 1 % of the
+epochs: those above the lower edge of the 0.99 quantile's bin, with times and positions). The
+result equals :func:`~overbound.methods.tail_extrapolation.tail_analysis` of the pooled table to
+the last bit, since both run the same passes over the same station-days.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import polars as pl
+
+from overbound.campaign import Window, _cut, _Dask, _Done, _failure, _Local, _read, _ticks
+from overbound.io.dataset import Partition
+from overbound.io.schema import InputError
+from overbound.methods.tail_partitions import (
+    ChainWalk,
+    Filter,
+    TailData,
+    TailFirst,
+    TailPlan,
+    anchor,
+    axis_block,
+    krs_spacing,
+    merge_tail_first,
+    merge_tail_second,
+    tail_data,
+    tail_first,
+    tail_plan,
+    tail_second,
+)
+
+__all__ = ["NO_SOLUTION", "TailInputs", "campaign_tail_data"]
+
+#: The reason of an axis without a solution epoch (as the pooled table's analysis gives it).
+NO_SOLUTION = str(InputError("<epoch table>", "no epoch with a solution"))
+
+
+@dataclass(frozen=True)
+class TailInputs:
+    """The reduced EVT input of each axis analysed, and why an axis could not be (``failed``)."""
+
+    data: dict[str, TailData]
+    failed: dict[str, str]
+
+
+def _first_task(partition: Partition, filters: dict[str, tuple[Filter, ...]], window: Window) -> _Done:
+    try:
+        table = _read(partition, window)
+        out = {
+            a: tail_first(axis_block(table, a), partition.station, partition.key, f)
+            for a, f in filters.items()
+        }
+    except (InputError, OSError, pl.exceptions.PolarsError, ValueError) as exc:
+        return _Done(None, (_failure(partition, exc),))
+    return _Done(out, computed=1)
+
+
+def _by_axis(merge: Callable, *parts: dict) -> dict:
+    """Per-axis partials merged axis by axis."""
+    return {a: merge(*(p[a] for p in parts)) for a in parts[0]}
+
+
+def _second_task(
+    partition: Partition, before: dict[str, Partition | None], plans: dict[str, TailPlan], window: Window
+) -> _Done:
+    """Pass 2 of a partition, with the partition before it of each axis (:attr:`TailPlan.prev`)."""
+    try:
+        table = _read(partition, window)
+        read = {b.key: _read(b, _cut(b, window)) for b in before.values() if b is not None}
+        out = {
+            a: tail_second(
+                axis_block(table, a),
+                partition.key,
+                p,
+                None if before[a] is None else axis_block(read[before[a].key], a),
+            )
+            for a, p in plans.items()
+        }
+    except (InputError, OSError, pl.exceptions.PolarsError, ValueError) as exc:
+        return _Done(None, (_failure(partition, exc),))
+    return _Done(out, computed=1)
+
+
+def _chain_task(parts: list[Partition], walks: dict[str, tuple], forward: bool, window: Window) -> _Done:
+    """One station's part of the KRS selection of each axis of ``walks`` (axis: ``(plan, anchor,
+    spacing, skip_first)``), its ``parts`` in walking order, each read once (pass 3)."""
+    chains = {a: ChainWalk(plan, at, spacing, forward) for a, (plan, at, spacing, _) in walks.items()}
+    try:
+        for p in parts:
+            table = _read(p, _cut(p, window))
+            for a, walk in chains.items():
+                walk.step(p.key, axis_block(table, a))
+    except (InputError, OSError, pl.exceptions.PolarsError, ValueError) as exc:
+        return _Done(None, (_failure(parts[0], exc),))
+    out = {a: w.values()[1:] if walks[a][3] else w.values() for a, w in chains.items()}
+    return _Done(out, computed=len(parts))
+
+
+def _concat(*parts: dict) -> dict:
+    """Per axis, the values of the walks in order (an axis absent from a walk adds nothing)."""
+    axes = dict.fromkeys(a for p in parts for a in p)
+    return {a: np.concatenate([p[a] for p in parts if a in p]) for a in axes}
+
+
+def campaign_tail_data(
+    parts: Sequence[Partition],
+    filters: dict[str, tuple[Filter, ...]],
+    *,
+    client=None,
+    time_range: Window = None,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> TailInputs:
+    """The reduced EVT input (:class:`~overbound.methods.tail_partitions.TailData`) of each axis of
+    ``filters`` (the HMI filters of :func:`~overbound.methods.tail_extrapolation.tail_filters`)
+    from ``parts`` (the partitions read by the counting, in dataset order), on ``client`` (Dask)
+    or in this process. An axis without a solution epoch, or whose partitions could not be read
+    in these passes, is in ``failed`` with the reason."""
+    runner = _Local() if client is None else _Dask(client)
+    by_station: dict[str, list[Partition]] = {}
+    for p in parts:
+        by_station.setdefault(p.station, []).append(p)
+    total = len(parts)
+    first = _map(
+        runner,
+        [[(p, filters, _cut(p, time_range)) for p in ps] for ps in by_station.values()],
+        _first_task,
+        functools.partial(_by_axis, merge_tail_first),
+        progress,
+        "EVT pass 1",
+        total,
+    )
+    if first.failures:
+        return _failed(filters, first)
+    plans, failed = {}, {}
+    for a, f in filters.items():
+        merged: TailFirst = first.partial[a]
+        if not any(b.n_solution for b in merged.blocks):
+            failed[a] = NO_SOLUTION
+            continue
+        try:
+            plans[a] = tail_plan(merged, f)
+        except InputError as exc:
+            failed[a] = str(exc)
+    if not plans:
+        return TailInputs({}, failed)
+    by_key = {p.key: p for p in parts}
+    shared = runner.share(plans)
+    items = [
+        [(p, _before(plans, by_key, p.key), shared, _cut(p, time_range)) for p in ps]
+        for ps in by_station.values()
+    ]
+    second = _map(
+        runner,
+        items,
+        _second_task,
+        functools.partial(_by_axis, merge_tail_second),
+        progress,
+        "EVT pass 2",
+        total,
+    )
+    if second.failures:
+        return _failed(filters, second)
+    anchors = {a: anchor(plan.first) for a, plan in plans.items()}
+    data = {
+        a: tail_data(plans[a], second.partial[a], lambda spacing: np.empty(0)) for a in plans
+    }  # without the KRS selection yet: its spacing comes from the ACF
+    spacings = {a: krs_spacing(d.acf, d.interval_s) for a, d in data.items()}
+    walks = {a: (plans[a], anchors[a], spacings[a]) for a in plans}
+    chosen = _spaced(runner, by_station, walks, time_range, progress)
+
+    def spaced(a: str) -> Callable[[float], np.ndarray]:
+        def values(spacing: float) -> np.ndarray:
+            if spacing == spacings[a]:
+                return chosen[a]
+            return _spaced(runner, by_station, {a: (plans[a], anchors[a], spacing)}, time_range, None)[a]
+
+        return values
+
+    return TailInputs({a: dataclasses.replace(d, spaced=spaced(a)) for a, d in data.items()}, failed)
+
+
+def _before(plans: dict[str, TailPlan], by_key: dict[str, Partition], label: str) -> dict:
+    """Per axis, the partition before ``label`` whose last hour pairs with its first, if any."""
+    return {a: by_key.get(p.prev.get(label) or "") for a, p in plans.items()}
+
+
+def _spaced(runner, by_station, walks: dict[str, tuple], window, progress) -> dict[str, np.ndarray]:
+    """The KRS selection's SI of each axis (``walks``: axis: ``(plan, anchor, spacing)``): per
+    station one task per direction its axes walk (the anchor's station both ways), each reading
+    the station's partitions once (pass 3)."""
+    station_of = {p.key: p.station for ps in by_station.values() for p in ps}
+    names = list(by_station)
+    rank = {a: names.index(station_of[at[0]]) for a, (_, at, _) in walks.items()}
+    groups = []
+    for i, name in enumerate(names):
+        back, ahead = {}, {}
+        for a, (plan, at, spacing) in walks.items():
+            mine = at if i == rank[a] else ("", 0)
+            if i <= rank[a]:
+                back[a] = (plan, mine, spacing, False)
+            if i >= rank[a]:
+                ahead[a] = (plan, mine, spacing, i == rank[a])  # the anchor is in both walks
+        ps = by_station[name]
+        group = [(ps[::-1], back, False, window)] if back else []
+        groups.append(group + ([(ps, ahead, True, window)] if ahead else []))
+    done = runner.map_reduce(_chain_task, groups, _concat, _ticks(progress, "EVT pass 3", len(groups)))
+    failures = [f for d in done for f in d.failures]
+    if failures:
+        f = failures[0]
+        raise InputError(f"{f.station} {f.date}", f"unreadable in the EVT pass 3: {f.reason}")
+    return _concat(*(d.partial for d in done if d.partial is not None))
+
+
+def _map(runner, groups, task, merge, progress, stage: str, total: int) -> _Done:
+    """``task`` over the groups (stations), each merged, then the stations merged in order."""
+    done = runner.map_reduce(task, groups, merge, _ticks(progress, stage, total))
+    ok = [d.partial for d in done if d.partial is not None]
+    return _Done(
+        merge(*ok) if ok else None,
+        tuple(f for d in done for f in d.failures),
+        sum(d.cached for d in done),
+        sum(d.computed for d in done),
+    )
+
+
+def _failed(filters: dict, done: _Done) -> TailInputs:
+    f = done.failures[0]
+    why = f"partition {f.station} {f.date} unreadable in the EVT passes: {f.reason}"
+    return TailInputs({}, {a: why for a in filters})

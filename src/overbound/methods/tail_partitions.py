@@ -1,0 +1,701 @@
+r"""The EVT tail extrapolation's input, reduced station-day by station-day and merged exactly.
+
+:func:`~overbound.methods.tail_extrapolation.tail_analysis` needs far less than the pooled epoch
+table: the count of the analysed epochs, a few quantiles of the safety index (SI), its
+autocorrelation up to an hour, the epochs above the dependence level :math:`u_0` (the 0.99 quantile:
+1 % of them) with their times and which services' HMI filters keep them, the daily maxima, and the
+SI of the epochs at least the decorrelation time apart around the largest (the KRS input). All of
+it is gathered from the *blocks* of the pooled series (its station-days, the partitions of a
+campaign dataset) in three passes, and is equal to the last bit whether the blocks come from one
+table in memory (:func:`table_tail_data`) or from the partitions of a dataset
+(:mod:`overbound.campaign`):
+
+1. :func:`tail_first` per block: counts, the time steps (the sampling interval), the first and
+   last times (the stations' places on the pooled axis, :func:`~overbound.methods.pooling.pool_epochs`),
+   the SI's bins (:mod:`overbound.stats.mergeable`: exact quantiles), its maximum, the daily
+   maximum, the first alert of each HMI filter (the TTA of the block before). :func:`tail_plan`
+   merges them into what pass 2 needs.
+2. :func:`tail_second` per block, with the block before it (its last hour): the SI values in the
+   quantiles' bins, the lagged sums of the SI on its regular grid (:mod:`overbound.stats.lagged`:
+   integers, merged exactly in any order), the epochs above the lower edge of the 0.99 quantile's
+   bin with their pooled times and positions, and per service its HMI filter over them and its
+   counts. :func:`tail_data` finishes: the quantiles, the ACF, the exceedances of :math:`u_0`.
+3. The KRS selection (:func:`spaced_values`), once the decorrelation time is known: the greedy
+   chain of :func:`~overbound.stats.dependence.select_spaced` walked block by block, a station at
+   a time (stations are a day apart on the pooled axis, more than any spacing used, so each
+   station's chain starts afresh: forward from its first epoch after the station of the largest
+   SI, backward from its last before it, both ways from the largest SI in its own station).
+
+Every partial merges by concatenation in block order or by integer addition; none adds floats.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import polars as pl
+
+from overbound.io.schema import InputError, as_numpy
+from overbound.methods.pooling import PE_PL, pooled_offsets
+from overbound.stats.dependence import interval_from_steps, one_over_e_time, select_spaced, step_counts
+from overbound.stats.lagged import LaggedSums, acf_from_sums, fixed_point_bits, lagged_sums, merge_lagged
+from overbound.stats.mergeable import (
+    BinCounts,
+    bin_counts,
+    exact_percentile,
+    merge_counts,
+    rank_bins,
+    value_range,
+    values_in_bins,
+)
+
+__all__ = [
+    "ACF_MAX_LAG_S",
+    "DEPENDENCE_QUANTILE",
+    "SI_LEVELS",
+    "Block",
+    "ChainWalk",
+    "Filter",
+    "TailData",
+    "TailFirst",
+    "TailPlan",
+    "TailSecond",
+    "anchor",
+    "axis_block",
+    "krs_spacing",
+    "merge_tail_first",
+    "merge_tail_second",
+    "spaced_values",
+    "table_tail_data",
+    "tail_data",
+    "tail_first",
+    "tail_plan",
+    "tail_second",
+]
+
+#: Quantile of SI whose exceedances give the V_K curve and the clusters (Veerman et al., 3.2).
+DEPENDENCE_QUANTILE = 0.99
+#: Longest lag of the SI autocorrelation (s).
+ACF_MAX_LAG_S = 3600.0
+#: The SI quantiles reported.
+SI_LEVELS = (0.5, 0.9, 0.99, 0.999, 0.9999)
+
+#: An HMI filter (section 3.6): the alert limit (``None``: none) and the TTA (s). ``(None, 0.0)``
+#: keeps every epoch without the ``alert`` flag.
+Filter = tuple[float | None, float]
+_NEVER = np.iinfo(np.int64).max
+
+
+@dataclass(frozen=True)
+class Block:
+    """The solution epochs (finite PE, PL > 0) of one axis of a station-day, in time order.
+
+    ``t`` in µs (GPS time, or already on the pooled axis), ``pe`` the absolute error, ``n_rows``
+    the rows of the station-day, solution or not."""
+
+    t: np.ndarray
+    pe: np.ndarray
+    pl: np.ndarray
+    alert: np.ndarray
+    n_rows: int
+
+
+def axis_block(table: pl.DataFrame, axis: str) -> Block:
+    """The :class:`Block` of ``axis`` of one station-day of the epoch table."""
+    pe_col, pl_col = PE_PL[axis]
+    pe = np.abs(as_numpy(table[pe_col]).astype(np.float64, copy=False))
+    pls = as_numpy(table[pl_col]).astype(np.float64, copy=False)
+    ok = np.isfinite(pe) & np.isfinite(pls) & (pls > 0)
+    t = as_numpy(table["time"]).astype(np.int64, copy=False)
+    alert = (
+        as_numpy(table["alert"].fill_null(False)).astype(bool)
+        if "alert" in table.columns
+        else np.zeros(t.size, dtype=bool)
+    )
+    return Block(t[ok], pe[ok], pls[ok], alert[ok], table.height)
+
+
+def _keep(b: Block, f: Filter, next_alert: int | None) -> tuple[np.ndarray, int, int, int]:
+    """The epochs an HMI filter keeps and its counts (``_hmi_keep`` of the tail extrapolation):
+    not alerted; with an alert limit, PL < AL and not in the TTA before the next alert (PL >= AL
+    or the flag), ``next_alert`` being the first one after the block (µs, ``None``: none)."""
+    al, tta_s = f
+    keep = ~b.alert
+    n_alert = int(b.alert.sum())
+    if al is None:
+        return keep, n_alert, 0, 0
+    above = b.pl >= al
+    n_above = int(np.count_nonzero(above & ~b.alert))
+    alerts = above | b.alert
+    keep = keep & ~above
+    nxt = np.minimum.accumulate(np.where(alerts, b.t, _NEVER)[::-1])[::-1]
+    nxt = np.concatenate([nxt[1:], [_NEVER if next_alert is None else next_alert]])
+    ahead = np.where(nxt < _NEVER, nxt - b.t, _NEVER)
+    tta = keep & (ahead <= round(tta_s * 1e6))
+    return keep & ~tta, n_alert, n_above, int(tta.sum())
+
+
+def _first_alert(b: Block, f: Filter) -> int | None:
+    """The first epoch of the block that the filter's TTA counts back from."""
+    al = f[0]
+    if al is None:
+        return None
+    hit = np.flatnonzero((b.pl >= al) | b.alert)
+    return int(b.t[hit[0]]) if hit.size else None
+
+
+# --------------------------------------------------------------------------------------------------
+# pass 1
+
+
+@dataclass(frozen=True)
+class BlockFirst:
+    """What pass 1 keeps of one block (a few numbers)."""
+
+    station: str
+    label: str
+    n_rows: int
+    n_solution: int
+    counts: tuple[int, int, int, int]  # the main filter's n_alert, n_above, n_tta, n_used
+    first: int | None  # solution epochs' first and last time
+    last: int | None
+    kept_first: int | None  # the analysed epochs' first and last time
+    kept_last: int | None
+    si_max: float
+    si_argmax: int  # its position among the block's analysed epochs
+    n_mi: int
+    alerts: tuple[int | None, ...]  # first alert of each filter (the main one first)
+
+
+@dataclass(frozen=True)
+class TailFirst:
+    """Pass 1 of blocks in order: their :class:`BlockFirst`, and the SI bins and time steps merged."""
+
+    blocks: tuple[BlockFirst, ...]
+    bins: BinCounts
+    steps: tuple[np.ndarray, np.ndarray]
+
+
+def tail_first(
+    b: Block, station: str, label: str, filters: Sequence[Filter], next_alert: int | None = None
+) -> TailFirst:
+    """Pass 1 of one block; ``filters[0]`` the main one, ``next_alert`` its first alert after the
+    block (only a main filter with an alert limit needs it)."""
+    keep, n_alert, n_above, n_tta = _keep(b, filters[0], next_alert)
+    si = b.pe[keep] / b.pl[keep]
+    kt = b.t[keep]
+    n = int(b.t.size)
+    first = BlockFirst(
+        station,
+        label,
+        b.n_rows,
+        n,
+        (n_alert, n_above, n_tta, int(si.size)),
+        int(b.t[0]) if n else None,
+        int(b.t[-1]) if n else None,
+        int(kt[0]) if kt.size else None,
+        int(kt[-1]) if kt.size else None,
+        float(si.max()) if si.size else -math.inf,
+        int(np.argmax(si)) if si.size else -1,
+        int(np.count_nonzero(si > 1.0)),
+        tuple(_first_alert(b, f) for f in filters),
+    )
+    return TailFirst((first,), bin_counts(si), step_counts(np.diff(b.t)))
+
+
+def merge_tail_first(*parts: TailFirst) -> TailFirst:
+    """Pass-1 partials of consecutive blocks, in order."""
+    values = np.concatenate([p.steps[0] for p in parts])
+    counts = np.concatenate([p.steps[1] for p in parts])
+    uniq, inverse = np.unique(values, return_inverse=True)
+    return TailFirst(
+        tuple(b for p in parts for b in p.blocks),
+        merge_counts(*(p.bins for p in parts)),
+        (uniq, np.bincount(inverse, weights=counts, minlength=uniq.size).astype(np.int64)),
+    )
+
+
+# --------------------------------------------------------------------------------------------------
+# the plan of pass 2
+
+
+@dataclass(frozen=True)
+class TailPlan:
+    """What pass 2 needs, from the merged pass 1.
+
+    ``shift`` maps a block's times onto the pooled axis (add it); ``origin`` is the pooled time of
+    the first analysed epoch (slot 0 of the regular grid); ``prev`` names each block's block of
+    the day before when that exists (its last hour pairs with this block's first);
+    ``drop_last``: blocks whose last slot is shared with the next block's first (the next block
+    holds it); ``next_alert``: per block, each filter's first alert in the next block of its
+    station (pooled µs). ``quantiles``: per level, the rank bins and the count below them.
+    """
+
+    filters: tuple[Filter, ...]
+    dt_us: int
+    shift: dict[str, int]
+    origin: int
+    n_slots: int
+    max_lag: int
+    bits: int
+    n_used: int
+    quantiles: dict[float, tuple[np.ndarray, int]]
+    exceed_from: float  # exceedances are collected above this (the level's bin edge, or the level)
+    level: float | None  # the given threshold, or None: the 0.99 quantile
+    prev: dict[str, str | None]
+    drop_last: frozenset[str]
+    next_alert: dict[str, tuple[int | None, ...]]
+    first: TailFirst = field(repr=False)
+
+
+def _steps(first: TailFirst) -> tuple[np.ndarray, np.ndarray]:
+    """The time steps of the pooled series: those within blocks and between consecutive blocks
+    of a station."""
+    extra = [
+        b.first - a.last
+        for a, b in zip(first.blocks, first.blocks[1:], strict=False)
+        if a.station == b.station and a.last is not None and b.first is not None
+    ]
+    v, c = step_counts(np.array(extra, dtype=np.int64))
+    values = np.concatenate([first.steps[0], v])
+    uniq, inverse = np.unique(values, return_inverse=True)
+    counts = np.bincount(inverse, weights=np.concatenate([first.steps[1], c]), minlength=uniq.size)
+    return uniq, counts.astype(np.int64)
+
+
+def _stations(blocks: Sequence[BlockFirst]) -> dict[str, list[BlockFirst]]:
+    out: dict[str, list[BlockFirst]] = {}
+    for b in blocks:
+        if b.n_solution:
+            out.setdefault(b.station, []).append(b)
+    return out
+
+
+def tail_plan(first: TailFirst, filters: Sequence[Filter], threshold: float | None = None) -> TailPlan:
+    """The plan of pass 2 (``threshold``: a given one instead of the 0.99 quantile).
+
+    Raises
+    ------
+    InputError
+        Fewer than 3 analysed epochs.
+    """
+    blocks = first.blocks
+    n_used = sum(b.counts[3] for b in blocks)
+    if n_used < 3:
+        raise InputError("<epoch table>", f"only {n_used} epochs left to analyse")
+    dt = interval_from_steps(*_steps(first)) or 1_000_000
+    stations = _stations(blocks)
+    offs = pooled_offsets(
+        np.array([s[0].first for s in stations.values()], dtype=np.int64),
+        np.array([s[-1].last for s in stations.values()], dtype=np.int64),
+        dt,
+    )
+    shift = {b.label: int(o) - s[0].first for o, s in zip(offs, stations.values(), strict=True) for b in s}
+    kept = [b for b in blocks if b.counts[3] and b.label in shift]
+    origin = kept[0].kept_first + shift[kept[0].label]
+    last = kept[-1].kept_last + shift[kept[-1].label]
+    n_slots = (last - origin + dt // 2) // dt + 1
+    max_lag = int(min(round(ACF_MAX_LAG_S / (dt / 1e6)), n_slots - 1))
+    si_max = max(b.si_max for b in kept)
+    levels = (*SI_LEVELS, DEPENDENCE_QUANTILE)
+    quantiles = {q: rank_bins(first.bins, q, scale=1) for q in levels}
+    exceed_from = value_range(quantiles[DEPENDENCE_QUANTILE][0])[0] if threshold is None else threshold
+
+    def slot(t: int, label: str) -> int:
+        return (t + shift[label] - origin + dt // 2) // dt
+
+    prev, drop, nxt = {}, set(), {}
+    for s in stations.values():
+        for a, b in zip([None, *s], s, strict=False):
+            adjacent = a is not None and (b.first - a.last) <= ACF_MAX_LAG_S * 1e6 + dt
+            prev[b.label] = a.label if adjacent else None
+        for a, b in zip(s, [*s[1:], None], strict=True):
+            after = (None,) * len(filters) if b is None else b.alerts
+            nxt[a.label] = tuple(None if t is None else t + shift[b.label] for t in after)
+            if b is not None and a.counts[3] and b.counts[3]:
+                if slot(a.kept_last, a.label) == slot(b.kept_first, b.label):
+                    drop.add(a.label)
+    return TailPlan(
+        tuple(filters),
+        int(dt),
+        shift,
+        int(origin),
+        int(n_slots),
+        max_lag,
+        fixed_point_bits(n_used, si_max),
+        n_used,
+        quantiles,
+        float(exceed_from),
+        threshold,
+        prev,
+        frozenset(drop),
+        nxt,
+        first,
+    )
+
+
+# --------------------------------------------------------------------------------------------------
+# pass 2
+
+
+@dataclass(frozen=True)
+class TailSecond:
+    """Pass 2 of blocks in order.
+
+    ``values``: SI in the quantiles' bins; ``sums``: lagged sums; ``t``, ``x``, ``position``: the
+    analysed epochs with SI above :attr:`TailPlan.exceed_from` (pooled µs, SI, index among the
+    analysed epochs); per service filter (``filters[1:]``): ``keep`` over them, ``position`` among
+    that filter's analysed epochs, and its counts ``(n_alert, n_above, n_tta, n_used)``; ``n_used``
+    the main filter's analysed epochs (the offset of the next blocks' positions).
+    """
+
+    values: tuple[np.ndarray, ...]
+    sums: LaggedSums | None
+    t: np.ndarray
+    x: np.ndarray
+    position: np.ndarray
+    n_used: int
+    keep: tuple[np.ndarray, ...]
+    service_position: tuple[np.ndarray, ...]
+    service_counts: tuple[tuple[int, int, int, int], ...]
+
+
+def _grid(t: np.ndarray, si: np.ndarray, plan: TailPlan) -> tuple[int, np.ndarray]:
+    """The block's analysed epochs on the regular grid: its first slot and the values of its
+    slots (the larger one where two epochs share a slot, as ``regular_series``)."""
+    dt = plan.dt_us
+    k = (t - plan.origin + dt // 2) // dt
+    out = np.full(int(k[-1] - k[0]) + 1, np.nan)
+    if k.size > 1 and np.any(k[1:] == k[:-1]):
+        np.fmax.at(out, k - k[0], si)
+    else:
+        out[k - k[0]] = si
+    return int(k[0]), out
+
+
+def tail_second(b: Block, label: str, plan: TailPlan, before: Block | None = None) -> TailSecond:
+    """Pass 2 of one block; ``before``: the block of the day before (:attr:`TailPlan.prev`)."""
+    shift = plan.shift.get(label, 0)
+    nxt = plan.next_alert.get(label, (None,) * len(plan.filters))
+    keep, *_ = _keep(b, plan.filters[0], None if nxt[0] is None else nxt[0] - shift)
+    t = b.t[keep] + shift
+    si = b.pe[keep] / b.pl[keep]
+    values = tuple(values_in_bins(si, bins) for bins, _ in plan.quantiles.values())
+    sums = None
+    if si.size:
+        k0, grid = _grid(t, si, plan)
+        if label in plan.drop_last:
+            grid = grid[:-1]
+        head = None
+        if before is not None and plan.prev.get(label):
+            head = _before(before, plan, plan.prev[label], k0, grid)
+        sums = lagged_sums(grid, plan.max_lag, plan.bits, head)
+    up = si > plan.exceed_from
+    services, positions, counts = [], [], []
+    for j, f in enumerate(plan.filters[1:], start=1):
+        ks, n_alert, n_above, n_tta = _keep(b, f, None if nxt[j] is None else nxt[j] - shift)
+        services.append(ks[keep][up])
+        positions.append((np.cumsum(ks) - 1)[keep][up])
+        counts.append((n_alert, n_above, n_tta, int(ks.sum())))
+    return TailSecond(
+        values,
+        sums,
+        t[up],
+        si[up],
+        np.flatnonzero(up),
+        int(si.size),
+        tuple(services),
+        tuple(positions),
+        tuple(counts),
+    )
+
+
+def _before(prev: Block, plan: TailPlan, label: str, k0: int, grid: np.ndarray) -> np.ndarray:
+    """The values of the ``max_lag`` slots before slot ``k0`` from the block before; a slot the
+    two blocks share is merged into ``grid`` (its first value) with the larger value."""
+    shift = plan.shift[label]
+    nxt = plan.next_alert.get(label, (None,))[0]
+    keep, *_ = _keep(prev, plan.filters[0], None if nxt is None else nxt - shift)
+    t = prev.t[keep] + shift
+    si = prev.pe[keep] / prev.pl[keep]
+    head = np.full(plan.max_lag, np.nan)
+    if not t.size:
+        return head
+    dt = plan.dt_us
+    k = (t - plan.origin + dt // 2) // dt
+    if k[-1] == k0:  # the shared slot (left out of the block before by drop_last)
+        grid[0] = np.fmax(grid[0], si[k == k0].max())
+    near = (k < k0) & (k >= k0 - plan.max_lag)
+    np.fmax.at(head, k[near] - (k0 - plan.max_lag), si[near])
+    return head
+
+
+def merge_tail_second(*parts: TailSecond) -> TailSecond:
+    """Pass-2 partials of consecutive blocks, in order (positions offset by the blocks before)."""
+    offsets = np.cumsum([0, *(p.n_used for p in parts[:-1])])
+    n_services = len(parts[0].keep)
+    s_offsets = [np.cumsum([0, *(p.service_counts[j][3] for p in parts[:-1])]) for j in range(n_services)]
+    sums = [p.sums for p in parts if p.sums is not None]
+    return TailSecond(
+        tuple(np.concatenate(v) for v in zip(*(p.values for p in parts), strict=True)),
+        merge_lagged(*sums) if sums else None,
+        np.concatenate([p.t for p in parts]),
+        np.concatenate([p.x for p in parts]),
+        np.concatenate([p.position + o for p, o in zip(parts, offsets, strict=True)]),
+        int(sum(p.n_used for p in parts)),
+        tuple(np.concatenate([p.keep[j] for p in parts]) for j in range(n_services)),
+        tuple(
+            np.concatenate([p.service_position[j] + o for p, o in zip(parts, s_offsets[j], strict=True)])
+            for j in range(n_services)
+        ),
+        tuple(
+            tuple(int(sum(p.service_counts[j][i] for p in parts)) for i in range(4))
+            for j in range(n_services)
+        ),
+    )
+
+
+# --------------------------------------------------------------------------------------------------
+# the result
+
+
+@dataclass(frozen=True)
+class TailData:
+    """The reduced input of the tail extrapolation of one axis (module notes).
+
+    Attributes
+    ----------
+    n_rows, n_no_solution, n_stations, interval_s : of the pooled table.
+    counts : the main filter's ``(n_alert, n_above, n_tta, n_used)``.
+    level : :math:`u_0`, the 0.99 quantile of SI (or the given threshold).
+    quantiles : SI at :data:`SI_LEVELS`.
+    si_max, n_mi : the largest SI and the number above 1.
+    acf : autocorrelation of SI on the regular grid, lags 0 to :data:`ACF_MAX_LAG_S`.
+    t_s, x, position : the analysed epochs with SI above ``level`` (pooled s, SI, position).
+    block_max, block_size : the largest SI and the analysed epochs of each station-day.
+    services : per service filter, ``(keep over the exceedances, positions, counts)``.
+    spaced : ``spaced(spacing)`` gives the SI of the greedy selection at least ``spacing`` s apart
+        that contains the largest (:func:`~overbound.stats.dependence.select_spaced`).
+    """
+
+    n_rows: int
+    n_no_solution: int
+    n_stations: int
+    interval_s: float
+    counts: tuple[int, int, int, int]
+    level: float
+    quantiles: np.ndarray
+    si_max: float
+    n_mi: int
+    acf: np.ndarray
+    t_s: np.ndarray
+    x: np.ndarray
+    position: np.ndarray
+    block_max: np.ndarray
+    block_size: np.ndarray
+    services: tuple[tuple[np.ndarray, np.ndarray, tuple[int, int, int, int]], ...]
+    spaced: Callable[[float], np.ndarray] = field(repr=False, compare=False)
+
+
+def tail_data(plan: TailPlan, second: TailSecond, spaced: Callable[[float], np.ndarray]) -> TailData:
+    """Pass 1's plan and the merged pass 2 into :class:`TailData`."""
+    blocks = plan.first.blocks
+    n = plan.n_used
+    quant = {
+        q: exact_percentile(n, q, below, values, scale=1)
+        for (q, (_, below)), values in zip(plan.quantiles.items(), second.values, strict=True)
+    }
+    level = quant[DEPENDENCE_QUANTILE] if plan.level is None else plan.level
+    up = second.x > level
+    kept = [b for b in blocks if b.counts[3]]
+    return TailData(
+        n_rows=sum(b.n_rows for b in blocks),
+        n_no_solution=sum(b.n_rows - b.n_solution for b in blocks),
+        n_stations=len(_stations(blocks)),
+        interval_s=plan.dt_us / 1e6,
+        counts=tuple(int(sum(b.counts[i] for b in blocks)) for i in range(4)),
+        level=float(level),
+        quantiles=np.array([quant[q] for q in SI_LEVELS]),
+        si_max=max(b.si_max for b in kept),
+        n_mi=sum(b.n_mi for b in blocks),
+        acf=_acf(second.sums, plan),
+        t_s=second.t[up] / 1e6,
+        x=second.x[up],
+        position=second.position[up],
+        block_max=np.array([b.si_max for b in kept]),
+        block_size=np.array([b.counts[3] for b in kept], dtype=np.int64),
+        services=tuple(
+            (k[up], p[up][k[up]], c)
+            for k, p, c in zip(second.keep, second.service_position, second.service_counts, strict=True)
+        ),
+        spaced=spaced,
+    )
+
+
+def _acf(sums: LaggedSums | None, plan: TailPlan) -> np.ndarray:
+    if sums is None:
+        return np.full(plan.max_lag + 1, np.nan)
+    return acf_from_sums(sums)
+
+
+def anchor(first: TailFirst) -> tuple[str, int]:
+    """The block and position of the largest SI (the first on ties, in pooled order)."""
+    kept = [b for b in first.blocks if b.counts[3]]
+    best = max(range(len(kept)), key=lambda i: (kept[i].si_max, -i))
+    return kept[best].label, kept[best].si_argmax
+
+
+# --------------------------------------------------------------------------------------------------
+# pass 3: the KRS selection
+
+
+class ChainWalk:
+    """One station's part of the greedy selection, walked block by block (:func:`spaced_values`).
+
+    ``at``: the block and position of the largest SI (``("", 0)`` for a station without it). A
+    station after the anchor's station is walked forward from its first epoch, one before it
+    backward from its last, and the anchor's own station both ways from it (one walk each way):
+    stations are a day apart on the pooled axis, more than any spacing, so each station's chain
+    starts afresh. Per block the chain continues from the last time kept, with the comparisons of
+    ``select_spaced`` (pooled seconds as float64)."""
+
+    def __init__(self, plan: TailPlan, at: tuple[str, int], spacing: float, forward: bool) -> None:
+        if spacing >= 86_400.0:
+            raise ValueError(f"spacing {spacing} s: the stations' chains would not be apart")
+        self.plan, self.at, self.spacing, self.forward = plan, at, float(spacing), forward
+        self.last: np.float64 | None = None
+        self.started = False
+        self.out: list[np.ndarray] = []
+
+    def step(self, label: str, b: Block) -> None:
+        """Walk the next block (the blocks in time order forward, in reverse backward)."""
+        plan, forward, d = self.plan, self.forward, np.float64(self.spacing)
+        shift = plan.shift.get(label, 0)
+        nxt = plan.next_alert.get(label, (None,))[0]
+        keep, *_ = _keep(b, plan.filters[0], None if nxt is None else nxt - shift)
+        t_s = (b.t[keep] + shift) / 1e6
+        if not t_s.size:
+            return
+        if label == self.at[0]:
+            start, self.started = self.at[1], True
+        elif self.at[0] and not self.started:
+            return  # the anchor's station, before (after) the anchor
+        elif self.last is None:
+            start = 0 if forward else t_s.size - 1
+        elif forward:
+            start = int(np.searchsorted(t_s, self.last + d, side="left"))
+        else:
+            start = int(np.searchsorted(t_s, self.last - d, side="right")) - 1
+        if not 0 <= start < t_s.size:
+            return
+        if forward:
+            sel = select_spaced(t_s[start:], anchor=0, spacing=self.spacing) + start
+        else:
+            sel = select_spaced(t_s[: start + 1], anchor=start, spacing=self.spacing)
+        self.last = t_s[sel[-1]] if forward else t_s[sel[0]]
+        self.out.append(b.pe[keep][sel] / b.pl[keep][sel])
+
+    def values(self) -> np.ndarray:
+        """The SI selected, in time order."""
+        out = self.out if self.forward else self.out[::-1]
+        return np.concatenate(out) if out else np.empty(0)
+
+
+def spaced_values(
+    blocks: Iterable[tuple[str, Block]], plan: TailPlan, at: tuple[str, int], spacing: float, forward: bool
+) -> np.ndarray:
+    """:class:`ChainWalk` over a station's ``blocks`` (with their labels, in walking order)."""
+    walk = ChainWalk(plan, at, spacing, forward)
+    for label, b in blocks:
+        walk.step(label, b)
+    return walk.values()
+
+
+def krs_spacing(acf: np.ndarray, interval_s: float) -> float:
+    """The spacing of the KRS selection: the decorrelation time (first lag of the ACF below 1/e),
+    or :data:`ACF_MAX_LAG_S` when it does not drop below within the lags examined."""
+    decor = one_over_e_time(acf, interval_s)
+    return decor if math.isfinite(decor) else ACF_MAX_LAG_S
+
+
+# --------------------------------------------------------------------------------------------------
+# one table
+
+
+def _blocks_of(table: pl.DataFrame, axis: str) -> list[tuple[str, str, Block]]:
+    """The station-day blocks of a table (stations in the order of their first row, days in
+    order), with their station and label."""
+    t = as_numpy(table["time"]).astype(np.int64, copy=False)
+    st = table["station"].cast(pl.String)
+    frame = pl.DataFrame({"station": st, "day": t // 86_400_000_000, "row": np.arange(t.size)})
+    order = frame.with_columns(pl.col("station").cast(pl.Categorical).to_physical().alias("code"))
+    order = order.sort(["code", "day"], maintain_order=True)
+    groups = order.group_by(["code", "day"], maintain_order=True).agg(
+        pl.col("station").first(), pl.col("row")
+    )
+    out = []
+    for code, day, name, rows in groups.iter_rows():  # one per station-day
+        idx = np.asarray(rows, dtype=np.int64)
+        sub = table[idx] if not _contiguous(idx) else table.slice(int(idx[0]), idx.size)
+        sub = sub.sort("time") if sub.height > 1 and not sub["time"].is_sorted() else sub
+        out.append((name, f"{name}/{day}", axis_block(sub, axis)))
+        del code
+    return out
+
+
+def _contiguous(idx: np.ndarray) -> bool:
+    return bool(idx.size) and int(idx[-1]) - int(idx[0]) + 1 == idx.size
+
+
+def table_tail_data(
+    table: pl.DataFrame, axis: str, filters: Sequence[Filter], threshold: float | None = None
+) -> TailData:
+    """:class:`TailData` of an epoch table, by the passes of a dataset over its station-days."""
+    blocks = _blocks_of(table, axis)
+    main = filters[0]
+    nexts: list[int | None] = [None] * len(blocks)
+    if main[0] is not None:  # the main filter's TTA reaches into the next block of the station
+        for i in range(len(blocks) - 1):
+            if blocks[i][0] == blocks[i + 1][0]:
+                nexts[i] = _first_alert(blocks[i + 1][2], main)
+    first = merge_tail_first(
+        *(tail_first(b, s, label, filters, n) for (s, label, b), n in zip(blocks, nexts, strict=True))
+    )
+    plan = tail_plan(first, filters, threshold)
+    by_label = {label: b for _, label, b in blocks}
+    second = merge_tail_second(
+        *(tail_second(b, label, plan, by_label.get(plan.prev.get(label) or "")) for _, label, b in blocks)
+    )
+    at = anchor(first)
+    station_of = {label: s for s, label, _ in blocks}
+
+    def spaced(spacing: float) -> np.ndarray:
+        return _spaced_all(
+            [(station_of[label], label, b) for _, label, b in blocks], plan, at, spacing, station_of[at[0]]
+        )
+
+    return tail_data(plan, second, spaced)
+
+
+def _spaced_all(blocks, plan: TailPlan, at: tuple[str, int], spacing: float, anchor_station: str):
+    """:func:`spaced_values` over every station in order."""
+    stations: dict[str, list[tuple[str, Block]]] = {}
+    for s, label, b in blocks:
+        stations.setdefault(s, []).append((label, b))
+    names = list(stations)
+    k = names.index(anchor_station)
+    parts = []
+    for i, name in enumerate(names):
+        seq = stations[name]
+        if i < k:
+            parts.append(spaced_values(seq[::-1], plan, ("", 0), spacing, forward=False))
+        elif i > k:
+            parts.append(spaced_values(seq, plan, ("", 0), spacing, forward=True))
+        else:
+            back = spaced_values(seq[::-1], plan, at, spacing, forward=False)
+            ahead = spaced_values(seq, plan, at, spacing, forward=True)
+            parts.extend([back, ahead[1:]])
+    return np.concatenate(parts)

@@ -1,0 +1,139 @@
+"""The EVT tail extrapolation by partition (issue 14): its reduced input gathered station-day by
+station-day equals the pooled table's to the last bit, whatever the blocks' boundaries hold
+(alerts and PL >= AL whose TTA reaches into the day before, a grid slot shared across midnight,
+gaps, several stations), and the lagged sums of the ACF merge exactly in any order."""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+import numpy as np
+import polars as pl
+import pytest
+
+from overbound.analysis import analyze
+from overbound.campaign_tail import campaign_tail_data
+from overbound.io.dataset import ingest, partitions, read_dataset
+from overbound.jsontext import dumps
+from overbound.methods.tail_extrapolation import evt_dict, tail_analysis, tail_analysis_of, tail_filters
+from overbound.methods.tail_partitions import table_tail_data
+from overbound.simulate import SimulationConfig, simulate
+from overbound.stats.dependence import autocorrelation
+from overbound.stats.lagged import acf_from_sums, fixed_point_bits, lagged_sums, merge_lagged
+
+DAY_US = 86_400_000_000
+
+
+def test_lagged_sums_merge_exactly_in_any_order_and_give_the_autocorrelation() -> None:
+    rng = np.random.default_rng(3)
+    x = np.cumsum(rng.normal(size=30_000)) * 0.01 + 0.3
+    x[rng.random(x.size) < 0.05] = np.nan
+    m = 400
+    bits = fixed_point_bits(x.size, float(np.nanmax(np.abs(x))))
+    cuts = [0, 5000, 5001, 12_000, 30_000]
+    parts = [lagged_sums(x[a:b], m, bits, before=x[max(a - m, 0) : a]) for a, b in itertools.pairwise(cuts)]
+    forward, backward = merge_lagged(*parts), merge_lagged(*parts[::-1])
+    tree = merge_lagged(merge_lagged(parts[0], parts[3]), merge_lagged(parts[2], parts[1]))
+    for a in (backward, tree):
+        assert np.array_equal(forward.xx, a.xx) and np.array_equal(forward.ww, a.ww) and forward.sx == a.sx
+    one = lagged_sums(x, m, bits)
+    assert np.array_equal(one.ww, forward.ww) and one.sw == forward.sw  # every pair counted once
+    ref = autocorrelation(x, max_lag=m)
+    np.testing.assert_allclose(acf_from_sums(forward), ref, rtol=0, atol=1e-13)
+    np.testing.assert_allclose(acf_from_sums(one), ref, rtol=0, atol=1e-13)
+
+
+def _network_table() -> pl.DataFrame:
+    """Two stations, two days at 1 Hz, with the boundaries' hard cases: station A's last epoch of
+    day 1 shares its grid slot with the first of day 2 (time-tag jitter), an alert burst and a
+    VPL above the LPV alert limit in the first seconds of day 2 (their TTA reaches back into day 1),
+    alerts and gaps elsewhere."""
+    tables = []
+    for i, name in enumerate(("A", "B")):
+        t = simulate(SimulationConfig(days=2, seed=40 + i, gap_rate_per_day=4.0, gap_mean_s=300)).table
+        t = t.with_columns(pl.lit(name).alias("station"), pl.lit(False).alias("alert"))
+        tables.append(t)
+    table = pl.concat(tables)
+    time_us = table["time"].dt.epoch("us").to_numpy().copy()
+    midnight = (int(time_us[0]) // DAY_US + 1) * DAY_US
+    a = (table["station"] == "A").to_numpy()
+    last_day1 = np.flatnonzero(a & (time_us < midnight))[-1]
+    assert time_us[last_day1] == midnight - 1_000_000
+    time_us[last_day1] += 700_000  # 23:59:59.7: the slot of 00:00:00
+    alert = table["alert"].to_numpy().copy()
+    vpl = table["vpl"].to_numpy().copy()
+    after = (time_us - midnight) // 1_000_000
+    alert[a & (after >= 3) & (after < 20)] = True  # its 6-10 s TTA reaches into day 1 for B? no: A
+    b = ~a
+    vpl[b & (after >= 4) & (after < 60)] = 70.0  # PL >= AL of every service at the start of B's day 2
+    rng = np.random.default_rng(1)
+    alert |= rng.random(alert.size) < 2e-4
+    return table.with_columns(
+        pl.Series("time", time_us).cast(pl.Datetime("us")), pl.Series("alert", alert), pl.Series("vpl", vpl)
+    )
+
+
+@pytest.fixture(scope="module")
+def network(tmp_path_factory) -> tuple[pl.DataFrame, Path]:
+    table = _network_table()
+    root = tmp_path_factory.mktemp("tail")
+    src = root / "network.parquet"
+    table.write_parquet(src)
+    ingest(root / "ds", [src])
+    pooled, _ = read_dataset(root / "ds", columns=("alert",))
+    return pooled, root / "ds"
+
+
+def _same(a, b) -> None:
+    da, db = evt_dict(a), evt_dict(b)
+    for d in (da, db):
+        d.pop("timings", None)
+    assert dumps(da) == dumps(db)
+    assert np.array_equal(a.dependence.acf, b.dependence.acf, equal_nan=True)
+    assert np.array_equal(a.tail.clusters.peak_index, b.tail.clusters.peak_index)
+    assert (a.krs.statistic, a.krs.n) == (b.krs.statistic, b.krs.n)
+    assert np.array_equal(a.gev.block_maxima, b.gev.block_maxima)
+    for name in a.services:
+        assert a.services[name].counts == b.services[name].counts
+
+
+@pytest.mark.parametrize("axis", ["vertical", "horizontal"])
+def test_dataset_passes_equal_the_pooled_table(network, axis: str) -> None:
+    table, ds = network
+    assert len(partitions(ds)) == 4
+    expected = tail_analysis(table, axis=axis, n_boot=50, rng=2)
+    lpv = expected.services["LPV"].counts if axis == "vertical" else None
+    if lpv is not None:  # the boundary cases are there
+        assert lpv.n_pl_above_al > 0 and lpv.n_tta > 0 and expected.counts.n_alert > 0
+    inputs = campaign_tail_data(partitions(ds), {axis: tail_filters(axis)})
+    got = tail_analysis_of(inputs.data[axis], axis=axis, n_boot=50, rng=2)
+    _same(expected, got)
+
+
+def test_the_shared_slot_and_the_tta_across_midnight_are_those_of_the_pooled_grid(network) -> None:
+    """The pooled table's series is the reference: the block reduction reproduces its regular-grid
+    ACF (one slot holds the two epochs around midnight) and its TTA counts."""
+    from overbound.methods.pooling import pool_epochs
+    from overbound.stats.dependence import regular_series
+
+    table, _ = network
+    data = table_tail_data(table, "vertical", tail_filters("vertical"))
+    d = pool_epochs(table, "vertical")
+    keep = ~d.alert
+    reg = regular_series(d.t_us[keep], d.pe[keep] / d.pl[keep], interval_s=d.interval_us / 1e6)
+    assert reg.n_merged == 1
+    ref = autocorrelation(reg.values, max_lag=data.acf.size - 1)
+    np.testing.assert_allclose(data.acf, ref, rtol=0, atol=1e-12)
+    assert data.counts == (int(d.alert.sum()), 0, 0, int(keep.sum()))
+
+
+def test_analyze_dataset_runs_the_evt_by_partition(network, tmp_path: Path) -> None:
+    """``analyze`` of the dataset without the confidence level and the parametric analysis reads no
+    pooled table, and its EVT equals that of the same epochs as one table."""
+    table, ds = network
+    by_parts = analyze([ds], confidence=(), evt=None, evt_n_boot=30, cache=False)
+    assert by_parts.table.is_empty() and len(by_parts.evt) == 2
+    pooled = analyze(table, confidence=(), evt=None, evt_n_boot=30)
+    for a, b in zip(pooled.evt, by_parts.evt, strict=True):
+        _same(a, b)
