@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import polars as pl
 
-from overbound.campaign import Window, _cut, _Dask, _Done, _failure, _Local, _read, _ticks
+from overbound.campaign import Window, _cut, _Dask, _Done, _failure, _file_key, _Local, _read, _ticks
 from overbound.io.dataset import Partition
 from overbound.io.schema import InputError
 from overbound.methods.tail_partitions import (
@@ -69,13 +69,29 @@ def _by_axis(merge: Callable, *parts: dict) -> dict:
     return {a: merge(*(p[a] for p in parts)) for a in parts[0]}
 
 
+#: The last partitions read by pass 2 in this process (path, key, window, table): a task reads its
+#: partition and the one before, which the task of the partition before has just read.
+_RECENT: list[tuple] = []
+
+
+def _read_recent(partition: Partition, window: Window) -> pl.DataFrame:
+    """:func:`~overbound.campaign._read`, from :data:`_RECENT` when this process has just read it."""
+    key = (partition.path, _file_key(partition.path), window)
+    for k, table in _RECENT:
+        if k == key:
+            return table
+    table = _read(partition, window)
+    _RECENT[:] = [*_RECENT[-1:], (key, table)]
+    return table
+
+
 def _second_task(
     partition: Partition, before: dict[str, Partition | None], plans: dict[str, TailPlan], window: Window
 ) -> _Done:
     """Pass 2 of a partition, with the partition before it of each axis (:attr:`TailPlan.prev`)."""
     try:
-        table = _read(partition, window)
-        read = {b.key: _read(b, _cut(b, window)) for b in before.values() if b is not None}
+        read = {b.key: _read_recent(b, _cut(b, window)) for b in before.values() if b is not None}
+        table = _read_recent(partition, window)
         out = {
             a: tail_second(
                 axis_block(table, a),
@@ -170,9 +186,11 @@ def campaign_tail_data(
     if second.failures:
         return _failed(filters, second)
     anchors = {a: anchor(plan.first) for a, plan in plans.items()}
-    data = {
-        a: tail_data(plans[a], second.partial[a], lambda spacing: np.empty(0)) for a in plans
-    }  # without the KRS selection yet: its spacing comes from the ACF
+    merged = second.partial
+    del second
+    # without the KRS selection yet: its spacing comes from the ACF
+    data = {a: tail_data(plans[a], merged.pop(a), lambda spacing: np.empty(0)) for a in plans}
+    _RECENT.clear()
     spacings = {a: krs_spacing(d.acf, d.interval_s) for a, d in data.items()}
     walks = {a: (plans[a], anchors[a], spacings[a]) for a in plans}
     chosen = _spaced(runner, by_station, walks, time_range, progress)
