@@ -23,7 +23,7 @@ import sys
 
 import numpy as np
 
-__all__ = ["keep_freed_memory"]
+__all__ = ["keep_freed_memory", "release_freed_memory"]
 
 # mallopt parameters of glibc's malloc.h
 _M_TRIM_THRESHOLD = -1
@@ -59,3 +59,17 @@ def _apply() -> bool:
         return False
     mallopt.argtypes, mallopt.restype = (ctypes.c_int, ctypes.c_int), ctypes.c_int
     return all(mallopt(param, value) == 1 for param, value in _SETTINGS)
+
+
+def release_freed_memory() -> bool:
+    """Give the heap memory freed so far back to the system (glibc's ``malloc_trim``); True if
+    some was. For a process that kept it (:func:`keep_freed_memory`) and now waits: the workers of
+    a campaign between its passes and the driver's own work."""
+    if not sys.platform.startswith("linux"):
+        return False
+    try:
+        trim = ctypes.CDLL(None).malloc_trim
+    except (OSError, AttributeError):
+        return False
+    trim.argtypes, trim.restype = (ctypes.c_size_t,), ctypes.c_int
+    return bool(trim(0))

@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import polars as pl
 
+from overbound._allocator import release_freed_memory
 from overbound.campaign import CampaignCounting, count_campaign, partitions_in
 from overbound.io.dataset import is_dataset, read_dataset, read_manifest
 from overbound.io.geodesy import Reference
@@ -332,6 +333,8 @@ def _analyze_campaign(
     evt_done = None
     if not counting_only:
         evt_done = _campaign_evt(dataset, network, levels, methods, client, time_range, progress)
+    if client is not None:  # the workers wait now: give back what the passes kept for reuse
+        client.run(release_freed_memory)
     if counting_only or not methods.needs_table:  # nothing reads the pooled table
         done, failed = evt_done or ((), ())
         return Analysis(

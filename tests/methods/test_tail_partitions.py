@@ -137,3 +137,18 @@ def test_analyze_dataset_runs_the_evt_by_partition(network, tmp_path: Path) -> N
     pooled = analyze(table, confidence=(), evt=None, evt_n_boot=30)
     for a, b in zip(pooled.evt, by_parts.evt, strict=True):
         _same(a, b)
+
+
+def test_a_time_window_cuts_the_dataset_as_the_table(network) -> None:
+    """--start/--end: the partitions cut at the window's edges give the EVT of the table filtered."""
+    import datetime as dt
+
+    table, ds = network
+    day0 = table["time"].min().replace(hour=0, minute=0, second=0, microsecond=0)
+    window = (day0 + dt.timedelta(hours=6, minutes=30), day0 + dt.timedelta(days=1, hours=12))
+    cut = table.filter(pl.col("time") >= window[0], pl.col("time") < window[1])
+    by_parts = analyze([ds], confidence=(), evt=None, evt_n_boot=30, cache=False, time_range=window)
+    pooled = analyze(cut, confidence=(), evt=None, evt_n_boot=30)
+    assert len(by_parts.evt) == len(pooled.evt) == 2
+    for a, b in zip(pooled.evt, by_parts.evt, strict=True):
+        _same(a, b)
