@@ -333,8 +333,7 @@ def _analyze_campaign(
     evt_done = None
     if not counting_only:
         evt_done = _campaign_evt(dataset, network, levels, methods, client, time_range, progress)
-    if client is not None:  # the workers wait now: give back what the passes kept for reuse
-        client.run(release_freed_memory)
+    _release(client)
     if counting_only or not methods.needs_table:  # nothing reads the pooled table
         done, failed = evt_done or ((), ())
         return Analysis(
@@ -419,6 +418,13 @@ def _campaign_evt(
         except ValueError as exc:  # InputError too: too few tail values
             failed.append((axis, str(exc)))
     return tuple(done), tuple(failed)
+
+
+def _release(client) -> None:
+    """The workers wait now (the driver fits, or writes the report): they give back the memory
+    their passes kept for reuse, which would otherwise add to the campaign's peak."""
+    if client is not None:
+        client.run(release_freed_memory)
 
 
 #: Memory the default methods take per epoch of the pooled table they read (measured: 7.5 GB at the

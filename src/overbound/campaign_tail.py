@@ -18,7 +18,18 @@ from dataclasses import dataclass
 import numpy as np
 import polars as pl
 
-from overbound.campaign import Window, _cut, _Dask, _Done, _failure, _file_key, _Local, _read, _ticks
+from overbound.campaign import (
+    Window,
+    _cut,
+    _Dask,
+    _Done,
+    _failure,
+    _file_key,
+    _Local,
+    _merge_done,
+    _read,
+    _ticks,
+)
 from overbound.io.dataset import Partition
 from overbound.io.schema import InputError
 from overbound.methods.tail_partitions import (
@@ -240,14 +251,7 @@ def _spaced(runner, by_station, walks: dict[str, tuple], window, progress) -> di
 
 def _map(runner, groups, task, merge, progress, stage: str, total: int) -> _Done:
     """``task`` over the groups (stations), each merged, then the stations merged in order."""
-    done = runner.map_reduce(task, groups, merge, _ticks(progress, stage, total))
-    ok = [d.partial for d in done if d.partial is not None]
-    return _Done(
-        merge(*ok) if ok else None,
-        tuple(f for d in done for f in d.failures),
-        sum(d.cached for d in done),
-        sum(d.computed for d in done),
-    )
+    return _merge_done(merge, *runner.map_reduce(task, groups, merge, _ticks(progress, stage, total)))
 
 
 def _failed(filters: dict, done: _Done) -> TailInputs:

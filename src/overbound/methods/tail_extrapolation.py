@@ -27,13 +27,15 @@ import polars as pl
 
 from overbound.io.schema import InputError
 from overbound.jsontext import dumps
-from overbound.methods.pooling import PE_PL, PooledEpochs, pool_epochs
+from overbound.methods.pooling import PE_PL, pool_epochs
 from overbound.methods.tail_partitions import (
     ACF_MAX_LAG_S,
     DEPENDENCE_QUANTILE,
     SI_LEVELS,
+    Block,
     Filter,
     TailData,
+    hmi_keep,
     krs_spacing,
     table_tail_data,
 )
@@ -473,27 +475,9 @@ def analysed_series(
     svc = parse_service(service) if isinstance(service, str) else service
     d = pool_epochs(table, axis)
     al = svc.alert_limit(axis) if svc is not None else None
-    keep = _hmi_keep(d, al, svc.tta_s if svc is not None else 0.0)[0]
+    block = Block(d.t_us, d.pe, d.pl, d.alert, d.n_rows)
+    keep = hmi_keep(block, (al, svc.tta_s if svc is not None else 0.0), None)[0]
     return d.t_us[keep] / 1e6, d.pe[keep] / d.pl[keep]
-
-
-def _hmi_keep(d: PooledEpochs, alert_limit: float | None, tta_s: float) -> tuple[np.ndarray, int, int, int]:
-    """Epochs kept (not alerted; with an AL: PL < AL and not within TTA before an alert) and counts."""
-    keep = ~d.alert
-    n_alert = int(d.alert.sum())
-    if alert_limit is None:
-        return keep, n_alert, 0, 0
-    above = d.pl >= alert_limit
-    n_above = int(np.count_nonzero(above & ~d.alert))
-    alerts = above | d.alert
-    keep &= ~above
-    never = np.iinfo(np.int64).max
-    # time of the next alert strictly after each epoch (times are sorted): a reversed running minimum
-    nxt = np.minimum.accumulate(np.where(alerts, d.t_us, never)[::-1])[::-1]
-    nxt = np.concatenate([nxt[1:], [never]])
-    ahead = np.where(nxt < never, nxt - d.t_us, never)
-    tta = keep & (ahead <= round(tta_s * 1e6))
-    return keep & ~tta, n_alert, n_above, int(tta.sum())
 
 
 def _counts(d: TailData, counts: tuple[int, int, int, int]) -> EpochCounts:

@@ -65,6 +65,7 @@ __all__ = [
     "TailSecond",
     "anchor",
     "axis_block",
+    "hmi_keep",
     "krs_spacing",
     "merge_tail_first",
     "merge_tail_second",
@@ -118,8 +119,8 @@ def axis_block(table: pl.DataFrame, axis: str) -> Block:
     return Block(t[ok], pe[ok], pls[ok], alert[ok], table.height)
 
 
-def _keep(b: Block, f: Filter, next_alert: int | None) -> tuple[np.ndarray, int, int, int]:
-    """The epochs an HMI filter keeps and its counts (``_hmi_keep`` of the tail extrapolation):
+def hmi_keep(b: Block, f: Filter, next_alert: int | None) -> tuple[np.ndarray, int, int, int]:
+    """The epochs an HMI filter keeps (section 3.6) and its counts ``(n_alert, n_above, n_tta)``:
     not alerted; with an alert limit, PL < AL and not in the TTA before the next alert (PL >= AL
     or the flag), ``next_alert`` being the first one after the block (µs, ``None``: none)."""
     al, tta_s = f
@@ -184,7 +185,7 @@ def tail_first(
 ) -> TailFirst:
     """Pass 1 of one block; ``filters[0]`` the main one, ``next_alert`` its first alert after the
     block (only a main filter with an alert limit needs it)."""
-    keep, n_alert, n_above, n_tta = _keep(b, filters[0], next_alert)
+    keep, n_alert, n_above, n_tta = hmi_keep(b, filters[0], next_alert)
     si = b.pe[keep] / b.pl[keep]
     kt = b.t[keep]
     n = int(b.t.size)
@@ -380,7 +381,7 @@ def tail_second(b: Block, label: str, plan: TailPlan, before: Block | None = Non
     """Pass 2 of one block; ``before``: the block of the day before (:attr:`TailPlan.prev`)."""
     shift = plan.shift.get(label, 0)
     nxt = plan.next_alert.get(label, (None,) * len(plan.filters))
-    keep, *_ = _keep(b, plan.filters[0], None if nxt[0] is None else nxt[0] - shift)
+    keep, *_ = hmi_keep(b, plan.filters[0], None if nxt[0] is None else nxt[0] - shift)
     t = b.t[keep] + shift
     si = b.pe[keep] / b.pl[keep]
     values = tuple(values_in_bins(si, bins) for bins, _ in plan.quantiles.values())
@@ -396,7 +397,7 @@ def tail_second(b: Block, label: str, plan: TailPlan, before: Block | None = Non
     up = si > plan.exceed_from
     services, positions, counts = [], [], []
     for j, f in enumerate(plan.filters[1:], start=1):
-        ks, n_alert, n_above, n_tta = _keep(b, f, None if nxt[j] is None else nxt[j] - shift)
+        ks, n_alert, n_above, n_tta = hmi_keep(b, f, None if nxt[j] is None else nxt[j] - shift)
         services.append(ks[keep][up])
         positions.append((np.cumsum(ks) - 1)[keep][up])
         counts.append((n_alert, n_above, n_tta, int(ks.sum())))
@@ -418,7 +419,7 @@ def _before(prev: Block, plan: TailPlan, label: str, k0: int, grid: np.ndarray) 
     two blocks share is merged into ``grid`` (its first value) with the larger value."""
     shift = plan.shift[label]
     nxt = plan.next_alert.get(label, (None,))[0]
-    keep, *_ = _keep(prev, plan.filters[0], None if nxt is None else nxt - shift)
+    keep, *_ = hmi_keep(prev, plan.filters[0], None if nxt is None else nxt - shift)
     t = prev.t[keep] + shift
     si = prev.pe[keep] / prev.pl[keep]
     head = np.full(plan.max_lag, np.nan)
@@ -575,7 +576,7 @@ class ChainWalk:
         plan, forward, d = self.plan, self.forward, np.float64(self.spacing)
         shift = plan.shift.get(label, 0)
         nxt = plan.next_alert.get(label, (None,))[0]
-        keep, *_ = _keep(b, plan.filters[0], None if nxt is None else nxt - shift)
+        keep, *_ = hmi_keep(b, plan.filters[0], None if nxt is None else nxt - shift)
         t_s = (b.t[keep] + shift) / 1e6
         if not t_s.size:
             return
