@@ -152,3 +152,15 @@ def test_a_time_window_cuts_the_dataset_as_the_table(network) -> None:
     assert len(by_parts.evt) == len(pooled.evt) == 2
     for a, b in zip(pooled.evt, by_parts.evt, strict=True):
         _same(a, b)
+
+
+def test_a_table_whose_first_epoch_has_no_solution_is_analysed(network) -> None:
+    """The column check reads no epoch: a first row without a solution is just left out."""
+    table, _ = network
+    assert np.isfinite(table["vpe"][0]) and table["vpl"][0] > 0
+    before = int(table.select((~pl.col("vpe").is_finite() | ~(pl.col("vpl") > 0)).sum()).item())
+    first_nan = table.with_columns(
+        pl.when(pl.int_range(pl.len()) == 0).then(float("nan")).otherwise(pl.col("vpe")).alias("vpe")
+    )
+    a = tail_analysis(first_nan, axis="vertical", n_boot=20, rng=2)
+    assert a.counts.n_no_solution == before + 1 and a.counts.n_rows == table.height

@@ -912,7 +912,7 @@ def tail_analysis(
     chosen = _chosen_services(svc, services, axis)
     filters = _filters(svc, chosen, axis)
     _check_options(confidence, n_boot, threshold)
-    pool_epochs(table.head(0) if table.is_empty() else table.head(1), axis)  # the columns' check
+    _check_columns(table, axis)
     if not _has_solution(table, axis):
         raise InputError("<epoch table>", "no epoch with a solution")
     level = None if threshold == "auto" else float(threshold)
@@ -932,6 +932,15 @@ def tail_analysis(
         gev_boot=gev_boot,
         diagnostics=diagnostics,
     )
+
+
+def _check_columns(table: pl.DataFrame, axis: str) -> None:
+    """The axis is known and the table has its columns (as :func:`pool_epochs` checks them)."""
+    if axis not in PE_PL:
+        raise ValueError(f"axis must be 'vertical' or 'horizontal', got {axis!r}")
+    missing = [c for c in ("time", "station", *PE_PL[axis]) if c not in table.columns]
+    if missing:
+        raise InputError("<epoch table>", f"the {axis} analysis needs column(s) {', '.join(missing)}")
 
 
 def _has_solution(table: pl.DataFrame, axis: str) -> bool:
