@@ -164,3 +164,72 @@ def test_a_table_whose_first_epoch_has_no_solution_is_analysed(network) -> None:
     )
     a = tail_analysis(first_nan, axis="vertical", n_boot=20, rng=2)
     assert a.counts.n_no_solution == before + 1 and a.counts.n_rows == table.height
+
+
+def _random_network(seed: int) -> pl.DataFrame:
+    """1-3 stations of 1-2 days at 1 or 5 s, starting at any second of the day, with jittered time
+    tags, gaps, alert bursts, PLs above the alert limits or missing, and sometimes no horizontal."""
+    rng = np.random.default_rng(seed)
+    tables = []
+    for i in range(int(rng.integers(1, 4))):
+        cfg = SimulationConfig(
+            days=int(rng.integers(1, 3)),
+            interval_s=float(rng.choice([1.0, 5.0])),
+            seed=seed * 10 + i,
+            gap_rate_per_day=float(rng.uniform(0, 20)),
+            gap_mean_s=float(rng.uniform(5, 3000)),
+        )
+        t = simulate(cfg).table
+        tu = t["time"].dt.epoch("us").to_numpy() + int(rng.integers(0, 86_400)) * 1_000_000
+        tu = tu + rng.integers(-200_000, 200_000, size=tu.size) * (rng.random(tu.size) < 0.01)
+        tu = np.maximum.accumulate(tu)
+        t = t.with_columns(pl.Series("time", tu).cast(pl.Datetime("us")))
+        t = t.filter(pl.Series(np.concatenate([[True], np.diff(tu) > 0])))
+        n = t.height
+        alert = rng.random(n) < rng.choice([0.0, 1e-4, 1e-2])
+        vpl, hpe = t["vpl"].to_numpy().copy(), t["hpe"].to_numpy().copy()
+        for _ in range(int(rng.integers(0, 5))):
+            s = int(rng.integers(0, n))
+            alert[s : s + int(rng.integers(1, 400))] = True
+            vpl[int(rng.integers(0, n)) :][: int(rng.integers(1, 200))] = rng.choice([45.0, 60.0, np.nan])
+        if rng.random() < 0.2:
+            hpe[:] = np.nan
+        tables.append(
+            t.with_columns(
+                pl.lit(f"S{i}").alias("station"),
+                pl.Series("alert", alert),
+                pl.Series("vpl", vpl),
+                pl.Series("hpe", hpe),
+            )
+        )
+    return pl.concat(tables, how="diagonal_relaxed")
+
+
+def _outcome(run) -> str:
+    """The analysis's ``evt_dict`` JSON without timings, or the failure's text."""
+    try:
+        doc = evt_dict(run())
+    except ValueError as exc:  # InputError too: no solution, too few tail values
+        return f"failed: {exc}"
+    doc.pop("timings", None)
+    return dumps(doc)
+
+
+@pytest.mark.parametrize("seed", [3, 5, 104])
+def test_random_networks_give_the_same_evt_by_partition(seed: int, tmp_path: Path) -> None:
+    src = tmp_path / "network.parquet"
+    _random_network(seed).write_parquet(src)
+    ingest(tmp_path / "ds", [src])
+    table, _ = read_dataset(tmp_path / "ds", columns=("alert",))
+    parts = partitions(tmp_path / "ds")
+    for axis in ("vertical", "horizontal"):
+        expected = _outcome(lambda axis=axis: tail_analysis(table, axis=axis, n_boot=20, rng=1))
+
+        def by_parts(axis=axis):
+            inputs = campaign_tail_data(parts, {axis: tail_filters(axis)})
+            if axis not in inputs.data:
+                raise ValueError(inputs.failed[axis])
+            return tail_analysis_of(inputs.data[axis], axis=axis, n_boot=20, rng=1)
+
+        got = _outcome(by_parts)
+        assert got == expected
