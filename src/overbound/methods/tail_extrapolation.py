@@ -821,8 +821,11 @@ def tail_analysis(
        ``alert``): :math:`0 < t_{alert} - t \le TTA`. The counts are in :class:`EpochCounts`.
        Several stations are placed one after the other on one time axis (a day apart), so that no
        cluster spans two stations; daily blocks are per station and GPS day.
-    2. **Dependence** (section 3.2). ACF of SI on its regular grid (NaN in gaps), decorrelation time
-       (first lag below :math:`1/e`); V_K curve of the exceedances of the dependence level
+    2. **Dependence** (section 3.2). ACF of SI on its regular grid (NaN in gaps; the estimator of
+       :func:`~overbound.stats.dependence.autocorrelation`, computed from the lagged sums of each
+       station-day, :mod:`overbound.stats.lagged`, so that a campaign dataset read by partition
+       gives the same bits), decorrelation time (first lag below :math:`1/e`); V_K curve of the
+       exceedances of the dependence level
        :math:`u_0` (the :data:`DEPENDENCE_QUANTILE` quantile of SI, or the given threshold) on
        :math:`K \in [0, 10\,\tau_{dec}]`; K_T from the curve; runs declustering at :math:`u_0`
        with gap K_T; extremal index by Ferro & Segers at :math:`u`.
@@ -896,6 +899,12 @@ def tail_analysis(
         exposure with the service's integrity risk. *Choice:* the threshold is not chosen again per
         service (the filtered SI has the same tail unless the PL filter removes most epochs) - it
         would cost a GOF sequence per service.
+
+    **Reduced input.** Every step reads only what
+    :func:`~overbound.methods.tail_partitions.table_tail_data` reduces the table to (counts, SI
+    quantiles, ACF, the epochs above :math:`u_0` with their times, daily maxima, the KRS selection),
+    gathered station-day by station-day; :func:`tail_analysis_of` runs the steps on it, and a
+    campaign dataset gives the same input by partition (:mod:`overbound.campaign_tail`).
 
     References
     ----------
