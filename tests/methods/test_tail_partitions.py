@@ -44,6 +44,28 @@ def test_lagged_sums_merge_exactly_in_any_order_and_give_the_autocorrelation() -
     np.testing.assert_allclose(acf_from_sums(one), ref, rtol=0, atol=1e-13)
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_the_sums_with_missing_samples_from_their_runs_equal_the_fft_route(seed: int, monkeypatch) -> None:
+    """Blocks with few runs of missing samples (gaps, alerts) take the prefix-sum route: the same
+    pair counts exactly, and the same weighted sums to rounding, as three more FFT correlations."""
+    from overbound.stats import lagged
+
+    rng = np.random.default_rng(seed)
+    n, m = int(rng.integers(50, 5000)), int(rng.integers(1, 400))
+    x = rng.random(n)
+    x[rng.random(n) < [0.0, 0.01, 0.2, 0.9, 1.0, 0.05][seed]] = np.nan
+    start = int(rng.integers(0, n))
+    x[start : start + int(rng.integers(1, 1000))] = np.nan  # an outage
+    before = rng.random(int(rng.integers(0, m + 1)))
+    before[rng.random(before.size) < 0.3] = np.nan
+    runs = lagged_sums(x, m, 40, before)
+    monkeypatch.setattr(lagged, "RUNS_LIMIT", -1)
+    fft = lagged_sums(x, m, 40, before)
+    assert np.array_equal(runs.ww, fft.ww) and runs.sw == fft.sw and runs.sx == fft.sx
+    assert np.max(np.abs(runs.xw - fft.xw)) < 1000 and np.max(np.abs(runs.wx - fft.wx)) < 1000  # 1e-9
+    np.testing.assert_allclose(acf_from_sums(runs), acf_from_sums(fft), rtol=0, atol=1e-9)
+
+
 def _network_table() -> pl.DataFrame:
     """Two stations, two days at 1 Hz, with the boundaries' hard cases: station A's last epoch of
     day 1 shares its grid slot with the first of day 2 (time-tag jitter), an alert burst and a

@@ -70,37 +70,98 @@ def _fixed(x: np.ndarray | float, bits: int) -> np.ndarray:
     return np.rint(np.ldexp(np.asarray(x, dtype=np.float64), bits)).astype(np.int64)
 
 
+#: Largest number of (run of missing samples, lag) pairs for which the sums with a missing sample are
+#: formed from the runs (:func:`lagged_sums`); above, three more FFT correlations are cheaper.
+RUNS_LIMIT = 2_000_000
+
+
 def lagged_sums(x: np.ndarray, max_lag: int, bits: int, before: np.ndarray | None = None) -> LaggedSums:
     """The lagged sums of a block ``x`` (NaN where no valid sample), the pairs reaching into the
     ``before`` slots (the slots just before the block; NaN where none) included.
 
-    Each sum is one zero-padded real-FFT cross-correlation of the left (earlier) and right (later)
-    sequences, rounded to ``bits`` fractional bits.
+    :math:`S_{xx}` is a zero-padded real-FFT cross-correlation of the left (earlier) and right
+    (later) sequences. The three sums with a weight are the same sums over all pairs (prefix sums
+    and pair counts) minus those with a missing sample, formed from the runs of missing samples
+    when they are few (the usual gaps and alerts: :data:`RUNS_LIMIT`), else three more FFT
+    correlations. Each sum is rounded to ``bits`` fractional bits; the route depends on the
+    block alone, so that the same block always gives the same bits.
     """
     x = np.asarray(x, dtype=np.float64)
-    b = np.empty(0) if before is None else np.asarray(before, dtype=np.float64)
-    left = np.concatenate([b, x])
+    nb = 0 if before is None else np.asarray(before).size
+    left = x if before is None else np.concatenate([np.asarray(before, dtype=np.float64), x])
     lw = np.isfinite(left)
     lx = np.where(lw, left, 0.0)
-    rw, rx = lw.copy(), lx.copy()
-    rw[: b.size] = False
-    rx[: b.size] = 0.0
+    rx = lx.copy()
+    rx[:nb] = 0.0
     size = scipy.fft.next_fast_len(left.size + max_lag, real=True)
-    fx, fw = (np.conj(scipy.fft.rfft(a, size)) for a in (lx, lw.astype(np.float64)))
-    gx, gw = (scipy.fft.rfft(a, size) for a in (rx, rw.astype(np.float64)))
+    fx = np.conj(scipy.fft.rfft(lx, size))
 
-    def corr(fa: np.ndarray, gc: np.ndarray) -> np.ndarray:  # sum_j a[j] c[j + k], k = 0..max_lag
-        return scipy.fft.irfft(fa * gc, size)[: max_lag + 1]
+    def corr(fa: np.ndarray, c: np.ndarray) -> np.ndarray:  # sum_j a[j] c[j + k], k = 0..max_lag
+        return scipy.fft.irfft(fa * scipy.fft.rfft(c, size), size)[: max_lag + 1]
 
+    runs = _runs(~lw)
+    if runs.shape[0] * (max_lag + 1) <= RUNS_LIMIT:
+        xw, wx, ww = _weighted_by_runs(lx, rx, runs, nb, max_lag)
+    else:
+        rw = lw.astype(np.float64)
+        rw[:nb] = 0.0
+        fw = np.conj(scipy.fft.rfft(lw.astype(np.float64), size))
+        xw, wx, ww = corr(fx, rw), corr(fw, rx), np.rint(corr(fw, rw)).astype(np.int64)
     return LaggedSums(
-        _fixed(corr(fx, gx), bits),
-        _fixed(corr(fx, gw), bits),
-        _fixed(corr(fw, gx), bits),
-        np.rint(corr(fw, gw)).astype(np.int64),
+        _fixed(corr(fx, rx), bits),
+        _fixed(xw, bits),
+        _fixed(wx, bits),
+        ww,
         int(_fixed(float(np.sum(rx)), bits)),
-        int(np.count_nonzero(rw)),
+        int(np.count_nonzero(lw[nb:])),
         bits,
     )
+
+
+def _runs(flags: np.ndarray) -> np.ndarray:
+    """``[start, stop)`` of each run of true ``flags``, one row per run."""
+    d = np.diff(np.concatenate([[0], flags.astype(np.int8), [0]]))
+    return np.column_stack([np.flatnonzero(d == 1), np.flatnonzero(d == -1)])
+
+
+def _weighted_by_runs(
+    lx: np.ndarray, rx: np.ndarray, runs: np.ndarray, nb: int, m: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    r""":math:`S_{xw}, S_{wx}, S_{ww}` of :func:`lagged_sums` from the pairs of all slots minus those
+    with a missing sample, ``runs`` being the ``[start, stop)`` of the runs of missing slots of
+    ``before + x`` (``nb`` slots before).
+
+    Lag :math:`k` pairs the left slot :math:`u - k` with the right slot :math:`u` for
+    :math:`\max(nb, k) \le u < L`; with zero-filled values, prefix sums give every sum over a
+    range of slots: :math:`S_{xw}(k) = \sum_u x_{u-k} - \sum_{u 	ext{ missing}} x_{u-k}`,
+    :math:`S_{wx}(k) = \sum_u x_u - \sum_{j 	ext{ missing}} x_{j+k}`, and :math:`S_{ww}(k)` is
+    the pairs less those with a missing right slot, less those with a missing left slot, plus
+    those with both (the overlap of a run shifted by :math:`k` with another run).
+    """
+    n = lx.size
+    k = np.arange(m + 1)
+    lo = np.maximum(nb, k)  # first right slot of lag k
+    cl = np.concatenate([[0.0], np.cumsum(lx)])
+    cr = np.concatenate([[0.0], np.cumsum(rx)])
+    a0, a1 = runs[:, :1], runs[:, 1:]  # missing left slots j (columns: lags)
+    b0, b1 = np.maximum(a0, nb), np.maximum(a1, nb)  # missing right slots u >= nb
+    # sum of x[u - k] over the missing right slots u (u - k >= 0), and of x[j + k] over the missing j
+    miss_xw = (cl[np.maximum(b1 - k, 0)] - cl[np.maximum(b0 - k, 0)]).sum(axis=0)
+    miss_wx = (cr[np.minimum(a1 + k, n)] - cr[np.minimum(a0 + k, n)]).sum(axis=0)
+    xw = cl[n - k] - cl[lo - k] - miss_xw
+    wx = cr[n] - cr[lo] - miss_wx
+    pairs = n - lo
+    right = np.clip(b1 - np.maximum(b0, k), 0, None).sum(axis=0)  # missing u >= max(nb, k)
+    left_ = np.clip(np.minimum(a1, n - k) - np.maximum(a0, lo - k), 0, None).sum(axis=0)
+    # both: j in run A, u = j + k in run B: the overlap of [A0 + k, A1 + k) with [B0, B1)
+    # (only the pairs of runs that some lag 0..m brings together)
+    ia, ib = np.nonzero((b1[None, :, 0] > a0[:, :1]) & (b0[None, :, 0] < a1[:, :1] + m + 1))
+    both = np.zeros(m + 1, dtype=np.int64)
+    if ia.size:
+        lo_ab = np.maximum(a0[ia] + k, b0[ib])
+        hi_ab = np.minimum(a1[ia] + k, b1[ib])
+        both = np.clip(hi_ab - lo_ab, 0, None).sum(axis=0)
+    return xw, wx, (pairs - right - left_ + both).astype(np.int64)
 
 
 def merge_lagged(*parts: LaggedSums) -> LaggedSums:
