@@ -97,12 +97,13 @@ def _read_recent(partition: Partition, window: Window) -> pl.DataFrame:
 
 
 def _second_task(
-    partition: Partition, before: dict[str, Partition | None], plans: dict[str, TailPlan], window: Window
+    partition: Partition, before: dict[str, Partition | None], plans: dict[str, TailPlan], time_range: Window
 ) -> _Done:
-    """Pass 2 of a partition, with the partition before it of each axis (:attr:`TailPlan.prev`)."""
+    """Pass 2 of a partition, with the partition before it of each axis (:attr:`TailPlan.prev`),
+    each cut by the campaign's ``time_range`` where it cuts their days."""
     try:
-        read = {b.key: _read_recent(b, _cut(b, window)) for b in before.values() if b is not None}
-        table = _read_recent(partition, window)
+        read = {b.key: _read_recent(b, _cut(b, time_range)) for b in before.values() if b is not None}
+        table = _read_recent(partition, _cut(partition, time_range))
         out = {
             a: tail_second(
                 axis_block(table, a),
@@ -151,6 +152,8 @@ def campaign_tail_data(
     from ``parts`` (the partitions read by the counting, in dataset order), on ``client`` (Dask)
     or in this process. An axis without a solution epoch, or whose partitions could not be read
     in these passes, is in ``failed`` with the reason."""
+    if any(f[0][0] is not None for f in filters.values()):  # pass 1 would need the next day's alerts
+        raise ValueError("the main series of a dataset's EVT is not filtered by a service (tail_filters)")
     runner = _Local() if client is None else _Dask(client)
     by_station: dict[str, list[Partition]] = {}
     for p in parts:
@@ -182,8 +185,7 @@ def campaign_tail_data(
     by_key = {p.key: p for p in parts}
     shared = runner.share(plans)
     items = [
-        [(p, _before(plans, by_key, p.key), shared, _cut(p, time_range)) for p in ps]
-        for ps in by_station.values()
+        [(p, _before(plans, by_key, p.key), shared, time_range) for p in ps] for ps in by_station.values()
     ]
     second = _map(
         runner,

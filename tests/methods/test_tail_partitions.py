@@ -18,6 +18,7 @@ from overbound.io.dataset import ingest, partitions, read_dataset
 from overbound.jsontext import dumps
 from overbound.methods.tail_extrapolation import evt_dict, tail_analysis, tail_analysis_of, tail_filters
 from overbound.methods.tail_partitions import table_tail_data
+from overbound.services import SERVICES
 from overbound.simulate import SimulationConfig, simulate
 from overbound.stats.dependence import autocorrelation
 from overbound.stats.lagged import acf_from_sums, fixed_point_bits, lagged_sums, merge_lagged
@@ -255,3 +256,98 @@ def test_random_networks_give_the_same_evt_by_partition(seed: int, tmp_path: Pat
 
         got = _outcome(by_parts)
         assert got == expected
+
+
+def _tta_counts(table: pl.DataFrame, axis: str, al: float, tta_s: float) -> tuple[int, int, int]:
+    """An independent reference of section 3.6's filter per station: ``(n_above, n_tta, n_used)``
+    of the solution epochs, the next alert (PL >= AL or flagged) found by ``searchsorted``."""
+    pe_col, pl_col = ("vpe", "vpl") if axis == "vertical" else ("hpe", "hpl")
+    above = tta = used = 0
+    for _, st in table.group_by("station", maintain_order=True):
+        st = st.sort("time")
+        pe, pls = st[pe_col].to_numpy(), st[pl_col].to_numpy()
+        ok = np.isfinite(pe) & np.isfinite(pls) & (pls > 0)
+        t = st["time"].dt.epoch("us").to_numpy()[ok]
+        alert, pls = st["alert"].to_numpy()[ok], pls[ok]
+        is_alert = (pls >= al) | alert
+        alert_times = t[is_alert]
+        kept = ~alert & (pls < al)
+        nxt = np.searchsorted(alert_times, t, side="right")
+        ahead = np.where(
+            nxt < alert_times.size, alert_times[np.minimum(nxt, alert_times.size - 1)] - t, 1 << 62
+        )
+        in_tta = kept & (ahead <= round(tta_s * 1e6))
+        above += int(np.count_nonzero((pls >= al) & ~alert))
+        tta += int(in_tta.sum())
+        used += int((kept & ~in_tta).sum())
+    return above, tta, used
+
+
+def test_the_hmi_filters_equal_an_independent_reference_across_midnight(network) -> None:
+    """Every epoch within the TTA before an alert is dropped, the alert in the next day included."""
+    table, _ = network
+    data = table_tail_data(table, "vertical", tail_filters("vertical"))
+    names = [s.name for s in SERVICES.values() if s.alert_limit("vertical")]
+    for name, (_, _, counts) in zip(names, data.services, strict=True):
+        s = SERVICES[name]
+        assert counts[1:] == _tta_counts(table, "vertical", s.alert_limit("vertical"), s.tta_s), name
+    lpv = dict(zip(names, data.services, strict=True))["LPV"][2]
+    assert lpv[2] >= 2  # 23:59:58 and 23:59:59 before the PL above the AL at 00:00:04 (TTA 6 s)
+
+
+def test_a_service_keeping_epochs_the_filtering_service_drops_is_fitted_on_its_own_epochs(network) -> None:
+    """tail_analysis(service=LPV-200, services=(APV-I,)): APV-I's HMI fit sees every epoch APV-I
+    keeps, not only those LPV-200 keeps (its exceedances of the threshold, counted independently)."""
+    table, _ = network
+    a = tail_analysis(table, axis="vertical", service="LPV-200", services=("APV-I",), n_boot=20, rng=1)
+    s = SERVICES["APV-I"]
+    hmi = a.services["APV-I"]
+    assert (hmi.counts.n_pl_above_al, hmi.counts.n_tta, hmi.counts.n_used) == _tta_counts(
+        table, "vertical", s.alert_limit("vertical"), s.tta_s
+    )
+    from overbound.methods.tail_extrapolation import analysed_series
+
+    _, si = analysed_series(table, axis="vertical", service="APV-I")
+    assert hmi.tail.n_exceedances == int(np.count_nonzero(si > hmi.tail.threshold))
+
+
+def test_short_first_days_an_empty_grid_and_a_window_in_the_last_hour(tmp_path: Path) -> None:
+    """A station whose first day holds only its last 30 minutes (a block shorter than the ACF's
+    lags, with no day before), another whose first day is one epoch at 23:59:59.7 sharing its slot
+    with the next day's first (an empty grid), and a window opening at 23:30: the dataset equals
+    the table."""
+    import datetime as dt
+
+    a = simulate(SimulationConfig(days=2, seed=7)).table.with_columns(pl.lit("A").alias("station"))
+    day0 = a["time"].min()
+    a = a.filter(pl.col("time") >= day0 + dt.timedelta(hours=23, minutes=30))
+    b = simulate(SimulationConfig(days=1, seed=8)).table.with_columns(
+        pl.lit("B").alias("station"), pl.col("time") + dt.timedelta(days=1)
+    )
+    lone = b.head(1).with_columns(pl.col("time") - dt.timedelta(milliseconds=300))
+    table = pl.concat([a, lone, b]).with_columns(pl.lit(False).alias("alert"))
+    src = tmp_path / "t.parquet"
+    table.write_parquet(src)
+    ingest(tmp_path / "ds", [src])
+    pooled, _ = read_dataset(tmp_path / "ds", columns=("alert",))
+    assert len(partitions(tmp_path / "ds")) == 4
+    for window in (None, (day0 + dt.timedelta(hours=23, minutes=30, seconds=20), None)):
+        cut = pooled if window is None else pooled.filter(pl.col("time") >= window[0])
+        by_parts = analyze(
+            [tmp_path / "ds"], confidence=(), evt=None, evt_n_boot=20, cache=False, time_range=window
+        )
+        one = analyze(cut, confidence=(), evt=None, evt_n_boot=20)
+        assert len(one.evt) == len(by_parts.evt) == 2 and one.evt_failures == by_parts.evt_failures == ()
+        for x, y in zip(one.evt, by_parts.evt, strict=True):
+            _same(x, y)
+
+
+def test_the_station_order_does_not_depend_on_live_categoricals(network) -> None:
+    """Stations are placed on the pooled axis in the order of their first row, whatever
+    Categorical of their names the process holds (polars' codes are process-wide)."""
+    table, _ = network
+    before = tail_analysis(table, axis="vertical", n_boot=20, rng=1)
+    held = pl.Series(["B", "A"]).cast(pl.Categorical)
+    after = tail_analysis(table, axis="vertical", n_boot=20, rng=1)
+    assert held.len() == 2
+    _same(before, after)

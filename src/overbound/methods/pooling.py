@@ -75,7 +75,9 @@ def _station_codes(station: pl.Series) -> np.ndarray:
     first = station[0]
     if first is not None and bool((station == first).all()):
         return np.zeros(station.len(), dtype=np.int64)
-    return as_numpy(station.cast(pl.String).cast(pl.Categorical).to_physical()).astype(np.int64)
+    names = station.cast(pl.String)
+    order = names.unique(maintain_order=True)  # first appearance (a Categorical's codes are process-wide)
+    return as_numpy(names.replace_strict(order, pl.int_range(order.len(), eager=True))).astype(np.int64)
 
 
 def _sorted(t: np.ndarray, codes: np.ndarray) -> bool:

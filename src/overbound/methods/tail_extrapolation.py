@@ -1029,15 +1029,16 @@ def tail_analysis_of(
     level = data.level
     clock["prepare"] = time.perf_counter() - t0
     t1 = time.perf_counter()
-    dep = _dependence(data.t_s, data.acf, dt_s, level, cluster_gap)
+    m = data.main
+    dep = _dependence(data.t_s[m], data.acf, dt_s, level, cluster_gap)
     clock["dependence"] = time.perf_counter() - t1
     t1 = time.perf_counter()
     tail = _tail_fit(
-        data.t_s,
-        data.x,
+        data.t_s[m],
+        data.x[m],
         n_total=n_used,
         level=level,
-        positions=data.position,
+        positions=data.position[m],
         variable="SI",
         interval_s=dt_s,
         gap_s=dep.cluster_gap_s,

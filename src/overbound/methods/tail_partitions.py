@@ -132,8 +132,9 @@ def hmi_keep(b: Block, f: Filter, next_alert: int | None) -> tuple[np.ndarray, i
     n_above = int(np.count_nonzero(above & ~b.alert))
     alerts = above | b.alert
     keep = keep & ~above
-    nxt = np.minimum.accumulate(np.where(alerts, b.t, _NEVER)[::-1])[::-1]
-    nxt = np.concatenate([nxt[1:], [_NEVER if next_alert is None else next_alert]])
+    # the next alert strictly after each epoch: a reversed running minimum, the next block's included
+    after = np.append(np.where(alerts, b.t, _NEVER), _NEVER if next_alert is None else next_alert)
+    nxt = np.minimum.accumulate(after[::-1])[::-1][1:]
     ahead = np.where(nxt < _NEVER, nxt - b.t, _NEVER)
     tta = keep & (ahead <= round(tta_s * 1e6))
     return keep & ~tta, n_alert, n_above, int(tta.sum())
@@ -311,7 +312,8 @@ def tail_plan(first: TailFirst, filters: Sequence[Filter], threshold: float | No
     prev, drop, nxt = {}, set(), {}
     for s in stations.values():
         for a, b in zip([None, *s], s, strict=False):
-            adjacent = a is not None and (b.first - a.last) <= ACF_MAX_LAG_S * 1e6 + dt
+            # any pair at most max_lag slots apart (slots round to the nearest: one more of slack)
+            adjacent = a is not None and (b.first - a.last) < (max_lag + 2) * dt
             prev[b.label] = a.label if adjacent else None
         for a, b in zip(s, [*s[1:], None], strict=True):
             after = (None,) * len(filters) if b is None else b.alerts
@@ -346,17 +348,20 @@ def tail_plan(first: TailFirst, filters: Sequence[Filter], threshold: float | No
 class TailSecond:
     """Pass 2 of blocks in order.
 
-    ``values``: SI in the quantiles' bins; ``sums``: lagged sums; ``t``, ``x``, ``position``: the
-    analysed epochs with SI above :attr:`TailPlan.exceed_from` (pooled µs, SI, index among the
-    analysed epochs); per service filter (``filters[1:]``): ``keep`` over them, ``position`` among
-    that filter's analysed epochs, and its counts ``(n_alert, n_above, n_tta, n_used)``; ``n_used``
-    the main filter's analysed epochs (the offset of the next blocks' positions).
+    ``values``: SI in the quantiles' bins (one array per level of :attr:`TailPlan.quantiles`);
+    ``sums``: lagged sums; ``t``, ``x``: the epochs with SI above :attr:`TailPlan.exceed_from` that
+    the main filter or a service's keeps (pooled µs, SI); ``main``: those the main filter keeps,
+    ``position`` their index among its analysed epochs; per service filter (``filters[1:]``):
+    ``keep`` over them, ``service_position`` among that filter's epochs, and its counts
+    ``(n_alert, n_above, n_tta, n_used)``; ``n_used`` the main filter's analysed epochs (the
+    offset of the next blocks' positions).
     """
 
     values: tuple[np.ndarray, ...]
     sums: LaggedSums | None
     t: np.ndarray
     x: np.ndarray
+    main: np.ndarray
     position: np.ndarray
     n_used: int
     keep: tuple[np.ndarray, ...]
@@ -393,24 +398,28 @@ def tail_second(b: Block, label: str, plan: TailPlan, before: Block | None = Non
         head = None
         if before is not None and plan.prev.get(label):
             head = _before(before, plan, plan.prev[label], k0, grid)
-        sums = lagged_sums(grid, plan.max_lag, plan.bits, head)
-    up = si > plan.exceed_from
-    services, positions, counts = [], [], []
+        sums = lagged_sums(grid, plan.max_lag, plan.bits, head) if grid.size else None
+    # the candidates: epochs above the level's bin that the main filter or a service's keeps (a
+    # service need not keep a subset of the main filter's epochs)
+    si_all = b.pe / b.pl
+    any_keep = keep.copy()
+    kept = []
     for j, f in enumerate(plan.filters[1:], start=1):
         ks, n_alert, n_above, n_tta = hmi_keep(b, f, None if nxt[j] is None else nxt[j] - shift)
-        services.append(ks[keep][up])
-        positions.append((np.cumsum(ks) - 1)[keep][up])
-        counts.append((n_alert, n_above, n_tta, int(ks.sum())))
+        kept.append((ks, (n_alert, n_above, n_tta, int(ks.sum()))))
+        any_keep |= ks
+    idx = np.flatnonzero(any_keep & (si_all > plan.exceed_from))
     return TailSecond(
         values,
         sums,
-        t[up],
-        si[up],
-        np.flatnonzero(up),
+        b.t[idx] + shift,
+        si_all[idx],
+        keep[idx],
+        (np.cumsum(keep) - 1)[idx],
         int(si.size),
-        tuple(services),
-        tuple(positions),
-        tuple(counts),
+        tuple(ks[idx] for ks, _ in kept),
+        tuple((np.cumsum(ks) - 1)[idx] for ks, _ in kept),
+        tuple(c for _, c in kept),
     )
 
 
@@ -445,6 +454,7 @@ def merge_tail_second(*parts: TailSecond) -> TailSecond:
         merge_lagged(*sums) if sums else None,
         np.concatenate([p.t for p in parts]),
         np.concatenate([p.x for p in parts]),
+        np.concatenate([p.main for p in parts]),
         np.concatenate([p.position + o for p, o in zip(parts, offsets, strict=True)]),
         int(sum(p.n_used for p in parts)),
         tuple(np.concatenate([p.keep[j] for p in parts]) for j in range(n_services)),
@@ -475,9 +485,10 @@ class TailData:
     quantiles : SI at :data:`SI_LEVELS`.
     si_max, n_mi : the largest SI and the number above 1.
     acf : autocorrelation of SI on the regular grid, lags 0 to :data:`ACF_MAX_LAG_S`.
-    t_s, x, position : the analysed epochs with SI above ``level`` (pooled s, SI, position).
+    t_s, x : the epochs with SI above ``level`` that the main filter or a service's keeps (pooled
+        s, SI); ``main``: those of the main series, ``position`` their index in it.
     block_max, block_size : the largest SI and the analysed epochs of each station-day.
-    services : per service filter, ``(keep over the exceedances, positions, counts)``.
+    services : per service filter, ``(keep over t_s and x, positions in its series, counts)``.
     spaced : ``spaced(spacing)`` gives the SI of the greedy selection at least ``spacing`` s apart
         that contains the largest (:func:`~overbound.stats.dependence.select_spaced`).
     """
@@ -494,6 +505,7 @@ class TailData:
     acf: np.ndarray
     t_s: np.ndarray
     x: np.ndarray
+    main: np.ndarray
     position: np.ndarray
     block_max: np.ndarray
     block_size: np.ndarray
@@ -525,6 +537,7 @@ def tail_data(plan: TailPlan, second: TailSecond, spaced: Callable[[float], np.n
         acf=_acf(second.sums, plan),
         t_s=second.t[up] / 1e6,
         x=second.x[up],
+        main=second.main[up],
         position=second.position[up],
         block_max=np.array([b.si_max for b in kept]),
         block_size=np.array([b.counts[3] for b in kept], dtype=np.int64),
@@ -630,9 +643,10 @@ def _blocks_of(table: pl.DataFrame, axis: str) -> list[tuple[str, str, Block]]:
     """The station-day blocks of a table (stations in the order of their first row, days in
     order), with their station and label."""
     t = as_numpy(table["time"]).astype(np.int64, copy=False)
-    st = table["station"].cast(pl.String)
-    frame = pl.DataFrame({"station": st, "day": t // 86_400_000_000, "row": np.arange(t.size)})
-    order = frame.with_columns(pl.col("station").cast(pl.Categorical).to_physical().alias("code"))
+    frame = pl.DataFrame(
+        {"station": table["station"].cast(pl.String), "day": t // 86_400_000_000, "row": np.arange(t.size)}
+    )
+    order = frame.with_columns(pl.col("row").min().over("station").alias("code"))  # first appearance
     order = order.sort(["code", "day"], maintain_order=True)
     groups = order.group_by(["code", "day"], maintain_order=True).agg(
         pl.col("station").first(), pl.col("row")

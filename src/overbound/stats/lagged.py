@@ -89,6 +89,9 @@ def lagged_sums(x: np.ndarray, max_lag: int, bits: int, before: np.ndarray | Non
     x = np.asarray(x, dtype=np.float64)
     nb = 0 if before is None else np.asarray(before).size
     left = x if before is None else np.concatenate([np.asarray(before, dtype=np.float64), x])
+    if x.size == 0:  # no right slot: no pair
+        zero = np.zeros(max_lag + 1, dtype=np.int64)
+        return LaggedSums(zero, zero.copy(), zero.copy(), zero.copy(), 0, 0, bits)
     lw = np.isfinite(left)
     lx = np.where(lw, left, 0.0)
     rx = lx.copy()
@@ -140,7 +143,7 @@ def _weighted_by_runs(
     """
     n = lx.size
     k = np.arange(m + 1)
-    lo = np.maximum(nb, k)  # first right slot of lag k
+    lo = np.minimum(np.maximum(nb, k), n)  # first right slot of lag k (n: no pair at that lag)
     cl = np.concatenate([[0.0], np.cumsum(lx)])
     cr = np.concatenate([[0.0], np.cumsum(rx)])
     a0, a1 = runs[:, :1], runs[:, 1:]  # missing left slots j (columns: lags)
@@ -148,7 +151,7 @@ def _weighted_by_runs(
     # sum of x[u - k] over the missing right slots u (u - k >= 0), and of x[j + k] over the missing j
     miss_xw = (cl[np.maximum(b1 - k, 0)] - cl[np.maximum(b0 - k, 0)]).sum(axis=0)
     miss_wx = (cr[np.minimum(a1 + k, n)] - cr[np.minimum(a0 + k, n)]).sum(axis=0)
-    xw = cl[n - k] - cl[lo - k] - miss_xw
+    xw = cl[np.maximum(n - k, 0)] - cl[np.maximum(lo - k, 0)] - miss_xw
     wx = cr[n] - cr[lo] - miss_wx
     pairs = n - lo
     right = np.clip(b1 - np.maximum(b0, k), 0, None).sum(axis=0)  # missing u >= max(nb, k)
