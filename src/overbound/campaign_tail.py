@@ -33,20 +33,23 @@ from overbound.campaign import (
 from overbound.io.dataset import Partition
 from overbound.io.schema import InputError
 from overbound.methods.tail_partitions import (
-    ChainWalk,
     Filter,
     TailData,
     TailFirst,
     TailPlan,
+    Walk,
     anchor,
     axis_block,
+    concat_by_axis,
     krs_spacing,
     merge_tail_first,
     merge_tail_second,
+    station_walks,
     tail_data,
     tail_first,
     tail_plan,
     tail_second,
+    walk_station,
 )
 
 __all__ = ["NO_SOLUTION", "TailInputs", "campaign_tail_data"]
@@ -118,25 +121,20 @@ def _second_task(
     return _Done(out, computed=1)
 
 
-def _chain_task(parts: list[Partition], walks: dict[str, tuple], forward: bool, window: Window) -> _Done:
-    """One station's part of the KRS selection of each axis of ``walks`` (axis: ``(plan, anchor,
-    spacing, skip_first)``), its ``parts`` in walking order, each read once (pass 3)."""
-    chains = {a: ChainWalk(plan, at, spacing, forward) for a, (plan, at, spacing, _) in walks.items()}
-    try:
+def _chain_task(parts: list[Partition], walks: dict[str, Walk], forward: bool, window: Window) -> _Done:
+    """One station's part of the KRS selection of each axis of ``walks``, its ``parts`` in walking
+    order, each read once for all axes (pass 3)."""
+
+    def blocks():
         for p in parts:
             table = _read(p, _cut(p, window))
-            for a, walk in chains.items():
-                walk.step(p.key, axis_block(table, a))
+            yield p.key, lambda a, table=table: axis_block(table, a)
+
+    try:
+        out = walk_station(blocks(), walks, forward)
     except (InputError, OSError, pl.exceptions.PolarsError, ValueError) as exc:
         return _Done(None, (_failure(parts[0], exc),))
-    out = {a: w.values()[1:] if walks[a][3] else w.values() for a, w in chains.items()}
     return _Done(out, computed=len(parts))
-
-
-def _concat(*parts: dict) -> dict:
-    """Per axis, the values of the walks in order (an axis absent from a walk adds nothing)."""
-    axes = dict.fromkeys(a for p in parts for a in p)
-    return {a: np.concatenate([p[a] for p in parts if a in p]) for a in axes}
 
 
 def campaign_tail_data(
@@ -229,26 +227,19 @@ def _spaced(runner, by_station, walks: dict[str, tuple], window, progress) -> di
     station one task per direction its axes walk (the anchor's station both ways), each reading
     the station's partitions once (pass 3)."""
     station_of = {p.key: p.station for ps in by_station.values() for p in ps}
-    names = list(by_station)
-    rank = {a: names.index(station_of[at[0]]) for a, (_, at, _) in walks.items()}
-    groups = []
-    for i, name in enumerate(names):
-        back, ahead = {}, {}
-        for a, (plan, at, spacing) in walks.items():
-            mine = at if i == rank[a] else ("", 0)
-            if i <= rank[a]:
-                back[a] = (plan, mine, spacing, False)
-            if i >= rank[a]:
-                ahead[a] = (plan, mine, spacing, i == rank[a])  # the anchor is in both walks
-        ps = by_station[name]
-        group = [(ps[::-1], back, False, window)] if back else []
-        groups.append(group + ([(ps, ahead, True, window)] if ahead else []))
-    done = runner.map_reduce(_chain_task, groups, _concat, _ticks(progress, "EVT pass 3", len(groups)))
+    anchor_station = {a: station_of[at[0]] for a, (_, at, _) in walks.items()}
+    groups = [
+        [(ps if forward else ps[::-1], w, forward, window) for forward, w in station]
+        for ps, station in zip(
+            by_station.values(), station_walks(list(by_station), anchor_station, walks), strict=True
+        )
+    ]
+    done = runner.map_reduce(_chain_task, groups, concat_by_axis, _ticks(progress, "EVT pass 3", len(groups)))
     failures = [f for d in done for f in d.failures]
     if failures:
         f = failures[0]
         raise InputError(f"{f.station} {f.date}", f"unreadable in the EVT pass 3: {f.reason}")
-    return _concat(*(d.partial for d in done if d.partial is not None))
+    return concat_by_axis(*(d.partial for d in done if d.partial is not None))
 
 
 def _map(runner, groups, task, merge, progress, stage: str, total: int) -> _Done:

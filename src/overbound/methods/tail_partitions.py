@@ -20,10 +20,10 @@ table in memory (:func:`table_tail_data`) or from the partitions of a dataset
    integers, merged exactly in any order), the epochs above the lower edge of the 0.99 quantile's
    bin with their pooled times and positions, and per service its HMI filter over them and its
    counts. :func:`tail_data` finishes: the quantiles, the ACF, the exceedances of :math:`u_0`.
-3. The KRS selection (:func:`spaced_values`), once the decorrelation time is known: the greedy
-   chain of :func:`~overbound.stats.dependence.select_spaced` walked block by block, a station at
-   a time (stations are a day apart on the pooled axis, more than any spacing used, so each
-   station's chain starts afresh: forward from its first epoch after the station of the largest
+3. The KRS selection (:func:`station_walks`, :func:`walk_station`), once the decorrelation time
+   is known: the greedy chain of :func:`~overbound.stats.dependence.select_spaced` walked block by
+   block, a station at a time (stations are a day apart on the pooled axis, more than any spacing
+   used, so each station's chain starts afresh: forward from its first epoch after the station of the largest
    SI, backward from its last before it, both ways from the largest SI in its own station).
 
 Every partial merges by concatenation in block order or by integer addition; none adds floats.
@@ -63,18 +63,21 @@ __all__ = [
     "TailFirst",
     "TailPlan",
     "TailSecond",
+    "Walk",
     "anchor",
     "axis_block",
+    "concat_by_axis",
     "hmi_keep",
     "krs_spacing",
     "merge_tail_first",
     "merge_tail_second",
-    "spaced_values",
+    "station_walks",
     "table_tail_data",
     "tail_data",
     "tail_first",
     "tail_plan",
     "tail_second",
+    "walk_station",
 ]
 
 #: Quantile of SI whose exceedances give the V_K curve and the clusters (Veerman et al., 3.2).
@@ -140,6 +143,14 @@ def hmi_keep(b: Block, f: Filter, next_alert: int | None) -> tuple[np.ndarray, i
     return keep & ~tta, n_alert, n_above, int(tta.sum())
 
 
+def _analysed(b: Block, label: str, plan: TailPlan) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The block's epochs the main filter keeps: the mask, their pooled times (µs) and SI."""
+    shift = plan.shift.get(label, 0)
+    nxt = plan.next_alert.get(label, (None,))[0]
+    keep, *_ = hmi_keep(b, plan.filters[0], None if nxt is None else nxt - shift)
+    return keep, b.t[keep] + shift, b.pe[keep] / b.pl[keep]
+
+
 def _first_alert(b: Block, f: Filter) -> int | None:
     """The first epoch of the block that the filter's TTA counts back from."""
     al = f[0]
@@ -178,7 +189,7 @@ class TailFirst:
 
     blocks: tuple[BlockFirst, ...]
     bins: BinCounts
-    steps: tuple[np.ndarray, np.ndarray]
+    steps: BinCounts  # the positive time steps within the blocks (µs) and how often each occurs
 
 
 def tail_first(
@@ -205,18 +216,15 @@ def tail_first(
         int(np.count_nonzero(si > 1.0)),
         tuple(_first_alert(b, f) for f in filters),
     )
-    return TailFirst((first,), bin_counts(si), step_counts(np.diff(b.t)))
+    return TailFirst((first,), bin_counts(si), BinCounts(*step_counts(np.diff(b.t))))
 
 
 def merge_tail_first(*parts: TailFirst) -> TailFirst:
     """Pass-1 partials of consecutive blocks, in order."""
-    values = np.concatenate([p.steps[0] for p in parts])
-    counts = np.concatenate([p.steps[1] for p in parts])
-    uniq, inverse = np.unique(values, return_inverse=True)
     return TailFirst(
         tuple(b for p in parts for b in p.blocks),
         merge_counts(*(p.bins for p in parts)),
-        (uniq, np.bincount(inverse, weights=counts, minlength=uniq.size).astype(np.int64)),
+        merge_counts(*(p.steps for p in parts)),
     )
 
 
@@ -253,7 +261,7 @@ class TailPlan:
     first: TailFirst = field(repr=False)
 
 
-def _steps(first: TailFirst) -> tuple[np.ndarray, np.ndarray]:
+def _steps(first: TailFirst) -> BinCounts:
     """The time steps of the pooled series: those within blocks and between consecutive blocks
     of a station."""
     extra = [
@@ -261,11 +269,7 @@ def _steps(first: TailFirst) -> tuple[np.ndarray, np.ndarray]:
         for a, b in zip(first.blocks, first.blocks[1:], strict=False)
         if a.station == b.station and a.last is not None and b.first is not None
     ]
-    v, c = step_counts(np.array(extra, dtype=np.int64))
-    values = np.concatenate([first.steps[0], v])
-    uniq, inverse = np.unique(values, return_inverse=True)
-    counts = np.bincount(inverse, weights=np.concatenate([first.steps[1], c]), minlength=uniq.size)
-    return uniq, counts.astype(np.int64)
+    return merge_counts(first.steps, BinCounts(*step_counts(np.array(extra, dtype=np.int64))))
 
 
 def _stations(blocks: Sequence[BlockFirst]) -> dict[str, list[BlockFirst]]:
@@ -288,7 +292,8 @@ def tail_plan(first: TailFirst, filters: Sequence[Filter], threshold: float | No
     n_used = sum(b.counts[3] for b in blocks)
     if n_used < 3:
         raise InputError("<epoch table>", f"only {n_used} epochs left to analyse")
-    dt = interval_from_steps(*_steps(first)) or 1_000_000
+    steps = _steps(first)
+    dt = interval_from_steps(steps.bins, steps.counts) or 1_000_000
     stations = _stations(blocks)
     offs = pooled_offsets(
         np.array([s[0].first for s in stations.values()], dtype=np.int64),
@@ -386,9 +391,7 @@ def tail_second(b: Block, label: str, plan: TailPlan, before: Block | None = Non
     """Pass 2 of one block; ``before``: the block of the day before (:attr:`TailPlan.prev`)."""
     shift = plan.shift.get(label, 0)
     nxt = plan.next_alert.get(label, (None,) * len(plan.filters))
-    keep, *_ = hmi_keep(b, plan.filters[0], None if nxt[0] is None else nxt[0] - shift)
-    t = b.t[keep] + shift
-    si = b.pe[keep] / b.pl[keep]
+    keep, t, si = _analysed(b, label, plan)
     values = tuple(values_in_bins(si, bins) for bins, _ in plan.quantiles.values())
     sums = None
     if si.size:
@@ -426,11 +429,7 @@ def tail_second(b: Block, label: str, plan: TailPlan, before: Block | None = Non
 def _before(prev: Block, plan: TailPlan, label: str, k0: int, grid: np.ndarray) -> np.ndarray:
     """The values of the ``max_lag`` slots before slot ``k0`` from the block before; a slot the
     two blocks share is merged into ``grid`` (its first value) with the larger value."""
-    shift = plan.shift[label]
-    nxt = plan.next_alert.get(label, (None,))[0]
-    keep, *_ = hmi_keep(prev, plan.filters[0], None if nxt is None else nxt - shift)
-    t = prev.t[keep] + shift
-    si = prev.pe[keep] / prev.pl[keep]
+    _, t, si = _analysed(prev, label, plan)
     head = np.full(plan.max_lag, np.nan)
     if not t.size:
         return head
@@ -567,7 +566,7 @@ def anchor(first: TailFirst) -> tuple[str, int]:
 
 
 class ChainWalk:
-    """One station's part of the greedy selection, walked block by block (:func:`spaced_values`).
+    """One station's part of the greedy selection, walked block by block (:func:`walk_station`).
 
     ``at``: the block and position of the largest SI (``("", 0)`` for a station without it). A
     station after the anchor's station is walked forward from its first epoch, one before it
@@ -586,11 +585,9 @@ class ChainWalk:
 
     def step(self, label: str, b: Block) -> None:
         """Walk the next block (the blocks in time order forward, in reverse backward)."""
-        plan, forward, d = self.plan, self.forward, np.float64(self.spacing)
-        shift = plan.shift.get(label, 0)
-        nxt = plan.next_alert.get(label, (None,))[0]
-        keep, *_ = hmi_keep(b, plan.filters[0], None if nxt is None else nxt - shift)
-        t_s = (b.t[keep] + shift) / 1e6
+        forward, d = self.forward, np.float64(self.spacing)
+        _, t_us, si = _analysed(b, label, self.plan)
+        t_s = t_us / 1e6
         if not t_s.size:
             return
         if label == self.at[0]:
@@ -610,7 +607,7 @@ class ChainWalk:
         else:
             sel = select_spaced(t_s[: start + 1], anchor=start, spacing=self.spacing)
         self.last = t_s[sel[-1]] if forward else t_s[sel[0]]
-        self.out.append(b.pe[keep][sel] / b.pl[keep][sel])
+        self.out.append(si[sel])
 
     def values(self) -> np.ndarray:
         """The SI selected, in time order."""
@@ -618,14 +615,53 @@ class ChainWalk:
         return np.concatenate(out) if out else np.empty(0)
 
 
-def spaced_values(
-    blocks: Iterable[tuple[str, Block]], plan: TailPlan, at: tuple[str, int], spacing: float, forward: bool
-) -> np.ndarray:
-    """:class:`ChainWalk` over a station's ``blocks`` (with their labels, in walking order)."""
-    walk = ChainWalk(plan, at, spacing, forward)
-    for label, b in blocks:
-        walk.step(label, b)
-    return walk.values()
+#: One axis's KRS walk of a station: the plan, the anchor (block label and position; ``("", 0)``
+#: for a station without it), the spacing (s), and whether the walk leaves its first value out (the
+#: anchor, when the walk backward from it already holds it).
+Walk = tuple[TailPlan, tuple[str, int], float, bool]
+
+
+def station_walks(
+    names: Sequence[str],
+    anchor_station: dict[str, str],
+    walks: dict[str, tuple[TailPlan, tuple[str, int], float]],
+) -> list[list[tuple[bool, dict[str, Walk]]]]:
+    """Per station of ``names`` (in pooled order), its walks: ``(forward, {axis: Walk})``, backward
+    first. ``walks``: per axis its plan, anchor and spacing; ``anchor_station``: per axis the
+    station of its anchor. A station before the anchor's is walked backward, one after it forward,
+    the anchor's both ways (:class:`ChainWalk`); the axes that walk a station the same way share
+    the walk."""
+    rank = {a: list(names).index(anchor_station[a]) for a in walks}
+    out = []
+    for i in range(len(names)):
+        back: dict[str, Walk] = {}
+        ahead: dict[str, Walk] = {}
+        for a, (plan, at, spacing) in walks.items():
+            mine = at if i == rank[a] else ("", 0)
+            if i <= rank[a]:
+                back[a] = (plan, mine, spacing, False)
+            if i >= rank[a]:
+                ahead[a] = (plan, mine, spacing, i == rank[a])
+        out.append([(False, back)] * bool(back) + [(True, ahead)] * bool(ahead))
+    return out
+
+
+def walk_station(
+    blocks: Iterable[tuple[str, Callable[[str], Block]]], walks: dict[str, Walk], forward: bool
+) -> dict[str, np.ndarray]:
+    """The SI each axis's :class:`ChainWalk` selects over a station's ``blocks`` (each a label and
+    the block of an axis, in walking order: each block is got once for all axes)."""
+    chains = {a: ChainWalk(plan, at, spacing, forward) for a, (plan, at, spacing, _) in walks.items()}
+    for label, block_of in blocks:
+        for a, walk in chains.items():
+            walk.step(label, block_of(a))
+    return {a: w.values()[1:] if walks[a][3] else w.values() for a, w in chains.items()}
+
+
+def concat_by_axis(*parts: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """Per axis, the values of the walks in order (an axis absent from a walk adds nothing)."""
+    axes = dict.fromkeys(a for p in parts for a in p)
+    return {a: np.concatenate([p[a] for p in parts if a in p]) for a in axes}
 
 
 def krs_spacing(acf: np.ndarray, interval_s: float) -> float:
@@ -652,12 +688,11 @@ def _blocks_of(table: pl.DataFrame, axis: str) -> list[tuple[str, str, Block]]:
         pl.col("station").first(), pl.col("row")
     )
     out = []
-    for code, day, name, rows in groups.iter_rows():  # one per station-day
+    for _code, day, name, rows in groups.iter_rows():  # one per station-day
         idx = np.asarray(rows, dtype=np.int64)
         sub = table[idx] if not _contiguous(idx) else table.slice(int(idx[0]), idx.size)
         sub = sub.sort("time") if sub.height > 1 and not sub["time"].is_sorted() else sub
         out.append((name, f"{name}/{day}", axis_block(sub, axis)))
-        del code
     return out
 
 
@@ -685,32 +720,18 @@ def table_tail_data(
         *(tail_second(b, label, plan, by_label.get(plan.prev.get(label) or "")) for _, label, b in blocks)
     )
     at = anchor(first)
-    station_of = {label: s for s, label, _ in blocks}
+    stations: dict[str, list[tuple[str, Block]]] = {}
+    for name, label, b in blocks:
+        stations.setdefault(name, []).append((label, b))
+    station_of_anchor = next(name for name, label, _ in blocks if label == at[0])
 
     def spaced(spacing: float) -> np.ndarray:
-        return _spaced_all(
-            [(station_of[label], label, b) for _, label, b in blocks], plan, at, spacing, station_of[at[0]]
-        )
+        groups = station_walks(list(stations), {axis: station_of_anchor}, {axis: (plan, at, spacing)})
+        parts = []
+        for seq, walks in zip(stations.values(), groups, strict=True):
+            for forward, w in walks:
+                items = seq if forward else seq[::-1]
+                parts.append(walk_station(((label, lambda _a, b=b: b) for label, b in items), w, forward))
+        return concat_by_axis(*parts)[axis]
 
     return tail_data(plan, second, spaced)
-
-
-def _spaced_all(blocks, plan: TailPlan, at: tuple[str, int], spacing: float, anchor_station: str):
-    """:func:`spaced_values` over every station in order."""
-    stations: dict[str, list[tuple[str, Block]]] = {}
-    for s, label, b in blocks:
-        stations.setdefault(s, []).append((label, b))
-    names = list(stations)
-    k = names.index(anchor_station)
-    parts = []
-    for i, name in enumerate(names):
-        seq = stations[name]
-        if i < k:
-            parts.append(spaced_values(seq[::-1], plan, ("", 0), spacing, forward=False))
-        elif i > k:
-            parts.append(spaced_values(seq, plan, ("", 0), spacing, forward=True))
-        else:
-            back = spaced_values(seq[::-1], plan, at, spacing, forward=False)
-            ahead = spaced_values(seq, plan, at, spacing, forward=True)
-            parts.extend([back, ahead[1:]])
-    return np.concatenate(parts)
