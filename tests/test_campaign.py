@@ -241,19 +241,19 @@ def test_verdicts_by_partition_on_a_real_scheduler_equal_one_file(
     assert file_doc["verdicts_by_station"] == ds_doc["verdicts_by_station"]
 
 
-def test_evt_by_partition_on_a_real_scheduler_equals_one_file(
+def test_evt_and_confidence_by_partition_on_a_real_scheduler_equal_one_file(
     dataset: Path, tmp_path: Path, scheduler
 ) -> None:
-    """The EVT tail extrapolation reduces the partitions (three passes on the two ``dask worker``
-    processes, no pooled table read): its evt-<axis>.json and the summary, verdicts included, equal
-    those of the same epochs as one file."""
+    """The EVT tail extrapolation and the PL confidence level reduce the partitions (their passes
+    on the two ``dask worker`` processes, no pooled table read): their JSON files and the summary,
+    verdicts included, equal those of the same epochs as one file."""
     from overbound.io.table import write_epochs
 
     table, _ = read_dataset(dataset)
     one = tmp_path / "network.parquet"
     write_epochs(table, one)
     ds = _copy(dataset, tmp_path)
-    common = ["--no-confidence", "--no-parametric"]
+    common = ["--no-parametric"]
     file_doc = _analyze([str(one), "-o", str(tmp_path / "file"), *common])
     ds_doc = _analyze([str(ds), "-o", str(tmp_path / "dataset"), "--scheduler", scheduler, *common])
     ds_doc.pop("network")
@@ -264,6 +264,9 @@ def test_evt_by_partition_on_a_real_scheduler_equals_one_file(
         for doc in (by_file, by_parts):
             doc.pop("timings", None)
         assert by_file == by_parts and by_parts["p_mi_95"] is not None
+        name = f"confidence-{axis}.json"
+        by_file, by_parts = ((tmp_path / d / name).read_text() for d in ("file", "dataset"))
+        assert by_file == by_parts and json.loads(by_parts)["bins"]
 
 
 def test_counting_only_on_a_real_scheduler_equals_in_process(
@@ -315,19 +318,21 @@ def test_counting_only_refuses_to_write_the_pooled_table(dataset: Path, tmp_path
 def test_methods_that_would_not_fit_in_memory_are_refused_before_any_work(
     dataset: Path, tmp_path: Path
 ) -> None:
-    """The methods still read the pooled table: a dataset whose table they could not hold is refused
-    up front, naming the options that analyse it by partition; nothing is counted or cached."""
+    """The parametric analysis still reads the pooled table: a dataset whose table it could not hold
+    is refused up front, naming the option that analyses the rest by partition; nothing is counted
+    or cached."""
     from overbound.analysis import METHODS_BYTES_PER_EPOCH, analyze
     from overbound.io.schema import InputError
 
     ds = _copy(dataset, tmp_path)
     table, _ = read_dataset(ds)
     need = table.height * METHODS_BYTES_PER_EPOCH
-    with pytest.raises(InputError, match="--no-confidence --no-parametric"):
-        analyze([ds], confidence=None, memory_limit=need - 1)
+    with pytest.raises(InputError, match="--no-parametric"):
+        analyze([ds], parametric=True, memory_limit=need - 1)
     assert not list(ds.rglob(".overbound"))
-    done = analyze([ds], confidence=None, evt=(), memory_limit=need)  # fits: run
-    assert done.confidence and done.evidence is not None
-    # without the methods that read it (the EVT reduces the partitions), no pooled table and no limit
+    done = analyze([ds], parametric=True, evt=(), memory_limit=need)  # fits: run
+    assert done.parametric and done.evidence is not None
+    # without the method that reads it (the others reduce the partitions), no pooled table, no limit
     assert analyze([ds], memory_limit=0).evidence is not None
     assert analyze([ds], evt=None, evt_n_boot=20, memory_limit=0).evt
+    assert analyze([ds], confidence=None, memory_limit=0).confidence

@@ -238,13 +238,13 @@ class _Methods:
     @property
     def none(self) -> bool:
         """No method asked: the counting and its evidence only."""
-        return not self.needs_table and self.evt is not None and not self.evt
+        return not self.parametric and self.evt is not None and not self.evt and self.confidence == ()
 
     @property
     def needs_table(self) -> bool:
-        """A method that still reads the pooled table of a dataset is asked (the PL confidence
-        level, the parametric analysis); the EVT reduces the partitions."""
-        return self.confidence is None or bool(self.confidence) or self.parametric
+        """A method that still reads the pooled table of a dataset is asked (the parametric
+        analysis); the PL confidence level and the EVT reduce the partitions."""
+        return self.parametric
 
 
 def _with_methods(
@@ -258,19 +258,24 @@ def _with_methods(
     network: CampaignCounting | None = None,
     evidence: Evidence | None = None,
     evt_done: tuple[tuple[TailAnalysis, ...], tuple[tuple[str, str], ...]] | None = None,
+    confidence_done: tuple[tuple[ConfidenceAnalysis, ...], list[tuple[str, str, str]]] | None = None,
 ) -> Analysis:
     """The analysis of ``table`` with its ``counting`` done: the evidence (unless given) and the
-    methods asked (the EVT's results when given: a dataset's, by partition)."""
+    methods asked (the EVT's and the confidence level's results when given: a dataset's, by
+    partition)."""
     if evidence is None:
         evidence = counted_evidence(table, counting, levels)
     confidence, evt, parametric = methods.confidence, methods.evt, methods.parametric
-    axes = _confidence_axes(table) if confidence is None else tuple(confidence)
-    if axes and progress:
-        progress("PL confidence level")
-    failures: list[tuple[str, str, str]] = []
-    cl = tuple(
-        c for a in axes if (c := _guarded(failures, "confidence", a, confidence_analysis, table, axis=a))
-    )
+    if confidence_done is None:
+        axes = _confidence_axes(table) if confidence is None else tuple(confidence)
+        if axes and progress:
+            progress("PL confidence level")
+        failures: list[tuple[str, str, str]] = []
+        cl = tuple(
+            c for a in axes if (c := _guarded(failures, "confidence", a, confidence_analysis, table, axis=a))
+        )
+    else:
+        cl, failures = confidence_done[0], list(confidence_done[1])
     if evt_done is None:
         evt_axes = _evt_axes(table) if evt is None else tuple(dict.fromkeys(evt))
         evt_done = _run_evt(table, evt_axes, levels, methods.evt_n_boot, methods.evt_seed, progress)
@@ -330,21 +335,25 @@ def _analyze_campaign(
     )
     report = _campaign_report(dataset, network)
     label = title or dataset.name
-    evt_done = None
+    evt_done = confidence_done = None
     if not counting_only:
+        confidence_done = _campaign_confidence(dataset, network, methods, client, time_range, progress)
         evt_done = _campaign_evt(dataset, network, levels, methods, client, time_range, progress)
     _release(client)
     if counting_only or not methods.needs_table:  # nothing reads the pooled table
         done, failed = evt_done or ((), ())
+        cl, cl_failed = confidence_done or ((), [])
         return Analysis(
             pl.DataFrame(),
             (report,),
             levels,
             network.counting,
             label,
+            confidence=cl,
             evt=done,
             evt_failures=failed,
             evidence=network.evidence,
+            method_failures=tuple(cl_failed),
             network=network,
         )
     table, _ = read_dataset(dataset, columns=columns, skip={f.key for f in network.failures})
@@ -360,6 +369,7 @@ def _analyze_campaign(
         network,
         network.evidence,
         evt_done,
+        confidence_done,
     )
 
 
@@ -420,6 +430,33 @@ def _campaign_evt(
     return tuple(done), tuple(failed)
 
 
+def _campaign_confidence(
+    dataset: Path,
+    network: CampaignCounting,
+    methods: _Methods,
+    client,
+    time_range,
+    progress: Callable[[str], None] | None,
+) -> tuple[tuple[ConfidenceAnalysis, ...], list[tuple[str, str, str]]]:
+    """The PL confidence level of each axis asked, from the partitions the counting read (the
+    passes of :mod:`overbound.campaign_confidence`): as of the pooled table, with its failures."""
+    from overbound.campaign_confidence import campaign_confidence
+
+    if methods.confidence == ():
+        return (), []
+    failed_keys = {f.key for f in network.failures}
+    parts = [p for p in partitions_in(dataset, time_range) if p.key not in failed_keys]
+
+    def tick(stage: str, done: int, total: int) -> None:
+        if progress:
+            progress(f"PL confidence level, {stage}: {done}/{total}")
+
+    run = campaign_confidence(parts, methods.confidence, client=client, time_range=time_range, progress=tick)
+    return run.done, [
+        ("confidence", axis, why if isinstance(why, str) else failure_text(why)) for axis, why in run.failed
+    ]
+
+
 def _release(client) -> None:
     """The workers wait now (the driver fits, or writes the report): they give back the memory
     their passes kept for reuse, which would otherwise add to the campaign's peak."""
@@ -445,11 +482,10 @@ def _check_methods_memory(dataset: Path, time_range, limit: int | None) -> None:
     if need > limit:
         raise InputError(
             str(dataset),
-            f"the PL confidence level and the parametric analysis still read the pooled table: {n:,} "
-            f"epochs, about {need / 1e9:.1f} GB, more than the {limit / 1e9:.1f} GB available; run with "
-            "--no-confidence --no-parametric (the KPIs, the verdicts and the EVT tail extrapolation, by "
-            "partition) or on a "
-            "shorter span (--start/--end)",
+            f"the parametric analysis still reads the pooled table: {n:,} epochs, about "
+            f"{need / 1e9:.1f} GB, more than the {limit / 1e9:.1f} GB available; run with --no-parametric "
+            "(the KPIs, the verdicts, the PL confidence level and the EVT tail extrapolation, by "
+            "partition) or on a shorter span (--start/--end)",
         )
 
 

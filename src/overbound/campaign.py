@@ -235,18 +235,23 @@ def _store(path: Path, key: str, value) -> None:
         tmp.unlink(missing_ok=True)
 
 
-def _read(partition: Partition, window: Window = None, only: Sequence[str] | None = None) -> pl.DataFrame:
-    """The counting columns of a partition (``only`` those of them), its epochs in ``window``
-    only when it cuts the day. A partition of the canonical schema (as ingest and simulate
-    write it) is read as it is; any other goes through the Parquet epoch reader."""
+def _read(
+    partition: Partition, window: Window = None, only: Sequence[str] | None = None, extra: Sequence[str] = ()
+) -> pl.DataFrame:
+    """The counting columns of a partition (``only`` those of them), and the optional columns
+    ``extra`` it has, its epochs in ``window`` only when it cuts the day. A partition of the
+    canonical schema (as ingest and simulate write it) is read as it is; any other goes through
+    the Parquet epoch reader."""
     schema = pl.read_parquet_schema(partition.path)
-    wanted = [c for c in (*REQUIRED, *COUNT_COLUMNS) if c in schema and (only is None or c in only)]
+    names = tuple(dict.fromkeys((*REQUIRED, *COUNT_COLUMNS, *extra)))
+    wanted = [c for c in names if c in schema and (only is None or c in only or c in extra)]
     if all(c in schema and schema[c] == COLUMN_TYPES[c] for c in wanted):
         table = pl.read_parquet(partition.path, columns=wanted)
     else:
         from overbound.io.table import read_parquet
 
-        table = read_parquet(partition.path, columns=COUNT_COLUMNS)[0].select(wanted)
+        table = read_parquet(partition.path, columns=(*COUNT_COLUMNS, *extra))[0]
+        table = table.select(c for c in names if c in table.columns and c in wanted)
     return table if window is None else filter_time(table, window)
 
 
@@ -482,7 +487,9 @@ class _Dask:
         return [r.result() if r is not None else _Done(None) for r in roots]
 
     def share(self, value):
-        return self.client.scatter(value, broadcast=True, hash=False)
+        # one object, under a key of its own: a dict would be scattered value by value under its own
+        # keys ("vertical", ...), and two dicts with the same keys would overwrite each other
+        return self.client.scatter([value], broadcast=True, hash=False)[0]
 
 
 def count_campaign(

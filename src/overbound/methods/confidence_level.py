@@ -14,6 +14,7 @@ Columns needed: ``time``, ``station``, ``vpe`` and ``vpl`` (vertical); ``hpe``,
 from __future__ import annotations
 
 import math
+from collections.abc import Collection
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,7 +32,13 @@ __all__ = [
     "BandSamples",
     "ConfidenceAnalysis",
     "ConfidenceBin",
+    "analysed_columns",
+    "band_widths",
+    "check_columns",
     "confidence_analysis",
+    "samples_bin",
+    "target_count",
+    "validate_parameters",
 ]
 
 AXES = ("vertical", "horizontal")
@@ -369,15 +376,16 @@ def confidence_analysis(
     >>> worst.sufficient, worst.confidence < 0.01, worst.pl_1 > worst.hi
     (True, True, True)
     """
-    _validate_parameters(axis, min_samples, spacing, tolerance, step, max_pl, max_tolerance, risk, core)
+    validate_parameters(axis, min_samples, spacing, tolerance, step, max_pl, max_tolerance, risk, core)
     data, stations = _prepare(table, axis, station)
     spacing_us = round(spacing * 1e6)
-    widths = tolerance * np.arange(1, math.floor(max_tolerance / tolerance + _EPS) + 1)
+    widths = band_widths(tolerance, max_tolerance)
     bins: list[ConfidenceBin] = []
     samples: list[BandSamples] = []
     pl_min = float(data.pl_sorted[0]) if data.pl_sorted.size else math.nan
-    n_targets = math.floor((max_pl - pl_min) / step + _EPS) + 1 if data.pl_sorted.size else 0
-    for k in range(max(n_targets, 0)):  # a loop over ~200 bands; everything inside is vectorised
+    for k in range(
+        target_count(pl_min, max_pl, step)
+    ):  # a loop over ~200 bands; everything inside is vectorised
         target = pl_min + k * step
         chosen, width, n_cand = _select_band(data, target, widths, spacing_us, min_samples)
         bin_, band = _band_statistics(
@@ -403,7 +411,7 @@ def confidence_analysis(
     )
 
 
-def _validate_parameters(
+def validate_parameters(
     axis: str,
     min_samples: int,
     spacing: float,
@@ -441,10 +449,10 @@ def _validate_parameters(
             raise ValueError(f"{name} must be finite and {rule}, got {value!r}")
 
 
-def _prepare(table: pl.DataFrame, axis: str, station: str | None) -> tuple[_Data, tuple[str, ...]]:
-    """Arrays of the analysed epochs in time order, and the station names."""
+def check_columns(columns: Collection[str], axis: str) -> None:
+    """Raise the :class:`InputError` of an epoch table whose ``columns`` lack one ``axis`` needs."""
     need = ("time", "station", *_COLUMNS[axis])
-    missing = [c for c in need if c not in table.columns]
+    missing = [c for c in need if c not in columns]
     if missing:
         if axis == "horizontal" and set(missing) & {"east", "north"}:
             raise InputError(
@@ -456,13 +464,13 @@ def _prepare(table: pl.DataFrame, axis: str, station: str | None) -> tuple[_Data
         raise InputError(
             "<epoch table>", f"the {axis} confidence analysis needs column(s) {', '.join(missing)}"
         )
-    st = table["station"].cast(pl.Categorical())
-    uniq = st.unique(maintain_order=True)
-    names = tuple(uniq.cast(pl.String).to_list())
-    phys = as_numpy(uniq.to_physical()).astype(np.int64)
-    codes = as_numpy(st.to_physical()).astype(np.int64)
-    sorter = np.argsort(phys)
-    code = sorter[np.searchsorted(phys, codes, sorter=sorter)] if codes.size else codes
+
+
+def analysed_columns(
+    table: pl.DataFrame, axis: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
+    """``(ok, pl, |error|, signed)`` of the rows of ``table``: ``ok`` marks the analysed epochs
+    (step 1 of :func:`confidence_analysis`), the arrays are those of every row."""
     error_col, pl_col, *components = _COLUMNS[axis]
     pl_ = as_numpy(table[pl_col]).astype(np.float64, copy=False)
     err = np.abs(as_numpy(table[error_col]).astype(np.float64, copy=False))
@@ -472,6 +480,30 @@ def _prepare(table: pl.DataFrame, axis: str, station: str | None) -> tuple[_Data
         ok &= np.isfinite(s)
     if "alert" in table.columns and table["alert"].any():
         ok &= ~as_numpy(table["alert"].fill_null(False))
+    return ok, pl_, err, signed
+
+
+def band_widths(tolerance: float, max_tolerance: float) -> np.ndarray:
+    """The half-widths tried for a band (step 5): ``tolerance`` times 1, 2, ... up to ``max_tolerance``."""
+    return tolerance * np.arange(1, math.floor(max_tolerance / tolerance + _EPS) + 1)
+
+
+def target_count(pl_min: float, max_pl: float, step: float) -> int:
+    """Number of targets ``pl_min + k step`` up to ``max_pl`` inclusive (step 2); 0 without epochs."""
+    return max(math.floor((max_pl - pl_min) / step + _EPS) + 1, 0) if math.isfinite(pl_min) else 0
+
+
+def _prepare(table: pl.DataFrame, axis: str, station: str | None) -> tuple[_Data, tuple[str, ...]]:
+    """Arrays of the analysed epochs in time order, and the station names."""
+    check_columns(table.columns, axis)
+    st = table["station"].cast(pl.Categorical())
+    uniq = st.unique(maintain_order=True)
+    names = tuple(uniq.cast(pl.String).to_list())
+    phys = as_numpy(uniq.to_physical()).astype(np.int64)
+    codes = as_numpy(st.to_physical()).astype(np.int64)
+    sorter = np.argsort(phys)
+    code = sorter[np.searchsorted(phys, codes, sorter=sorter)] if codes.size else codes
+    ok, pl_, err, signed = analysed_columns(table, axis)
     if station is not None:
         if station not in names:
             raise ValueError(f"station {station!r} is not in the table (stations: {', '.join(names)})")
@@ -533,6 +565,31 @@ def _slots(time_us: np.ndarray, spacing_us: int) -> int:
         return int(time_us.size)
     slot = time_us // spacing_us
     return int(np.count_nonzero(slot[1:] != slot[:-1])) + 1
+
+
+def samples_bin(
+    time_us: np.ndarray,
+    rows: np.ndarray,
+    station: np.ndarray,
+    pl: np.ndarray,
+    error: np.ndarray,
+    signed: tuple[np.ndarray, ...],
+    *,
+    axis: str,
+    target: float,
+    width: float,
+    n_candidates: int,
+    min_samples: int,
+    risk: float,
+    core: float,
+) -> tuple[ConfidenceBin, BandSamples]:
+    """The bin of a band and its samples (step 6) from the samples selected (in time order)."""
+    empty = np.empty(0)
+    data = _Data(rows, time_us, station, pl, error, signed, empty.astype(np.intp), empty)
+    chosen = np.arange(rows.size)
+    return _band_statistics(
+        data, chosen, axis, target, width, n_candidates, min_samples, risk=risk, core=core
+    )
 
 
 def _band_statistics(

@@ -1,0 +1,179 @@
+"""The PL confidence level of a campaign dataset, partition by partition.
+
+The three passes of :mod:`overbound.methods.confidence_partitions` over the partitions a counting
+read (:func:`overbound.campaign.count_campaign`), on the same runner (Dask or this process): passes 1
+and 2 one task per partition; pass 3 two tasks, the chains walked forward and backward across the
+days, each holding one day of all stations. The result equals
+:func:`~overbound.methods.confidence_level.confidence_analysis` of the pooled table to the last bit.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import polars as pl
+
+from overbound.campaign import Window, _cut, _Dask, _Done, _failure, _Local, _merge_done, _read, _ticks
+from overbound.io.dataset import Partition
+from overbound.io.schema import InputError
+from overbound.methods.confidence_level import ConfidenceAnalysis
+from overbound.methods.confidence_partitions import (
+    BandChains,
+    BandPlan,
+    BandSweep,
+    ConfidenceParameters,
+    band_block,
+    band_chains,
+    band_first,
+    band_plan,
+    band_second,
+    dataset_confidence,
+    day_block,
+    merge_band_first,
+    merge_band_second,
+)
+
+__all__ = ["ConfidenceRun", "campaign_confidence"]
+
+_EXTRA = ("east", "north", "alert")
+_ERRORS = (InputError, OSError, pl.exceptions.PolarsError, ValueError)
+
+
+@dataclass(frozen=True)
+class ConfidenceRun:
+    """The analyses of the axes done, and ``(axis, reason)`` of each axis that could not be: the
+    exception the pooled table's analysis would raise, or why a partition could not be read."""
+
+    done: tuple[ConfidenceAnalysis, ...]
+    failed: tuple[tuple[str, str | Exception], ...]
+
+
+def _first_task(partition: Partition, axes: tuple[str, ...], window: Window) -> _Done:
+    try:
+        table = _read(partition, window, extra=_EXTRA)
+        out = {a: band_first(table, a, partition.key, partition.station) for a in axes}
+    except _ERRORS as exc:
+        return _Done(None, (_failure(partition, exc),))
+    return _Done(out, computed=1)
+
+
+def _block(partition: Partition, table: pl.DataFrame, plan: BandPlan):
+    return band_block(
+        table, plan.axis, plan.station_index.get(partition.station, -1), plan.row0[partition.key]
+    )
+
+
+def _second_task(partition: Partition, plans: dict[str, BandPlan], window: Window) -> _Done:
+    try:
+        table = _read(partition, window, extra=_EXTRA)
+        out = {a: band_second(_block(partition, table, p), p) for a, p in plans.items()}
+    except _ERRORS as exc:
+        return _Done(None, (_failure(partition, exc),))
+    return _Done(out, computed=1)
+
+
+def _walk_task(
+    days: list[list[Partition]],
+    plans: dict[str, BandPlan],
+    chains: dict[str, BandChains],
+    forward: bool,
+    window: Window,
+) -> _Done:
+    """Pass 3 one way: ``days`` (the partitions of each day) in walking order, each day read once
+    for every axis, one day in memory."""
+    sweeps = {a: BandSweep(p, chains[a].chains, forward) for a, p in plans.items()}
+    try:
+        for parts in days:
+            tables = [_read(p, _cut(p, window), extra=_EXTRA) for p in parts]
+            for a, sweep in sweeps.items():
+                sweep.day(day_block([_block(p, t, plans[a]) for p, t in zip(parts, tables, strict=True)]))
+    except _ERRORS as exc:
+        return _Done(None, (_failure(parts[0], exc),))
+    return _Done({a: s.picks() for a, s in sweeps.items()}, computed=sum(map(len, days)))
+
+
+def _only(partial):
+    """The merge of a group of one task."""
+    return partial
+
+
+def _by_axis(merge: Callable, *parts: dict) -> dict:
+    return {a: merge(*(p[a] for p in parts)) for a in parts[0]}
+
+
+def campaign_confidence(
+    parts: Sequence[Partition],
+    axes: Sequence[str] | None,
+    *,
+    parameters: ConfidenceParameters | None = None,
+    client=None,
+    time_range: Window = None,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> ConfidenceRun:
+    """The PL confidence level of each of ``axes`` (``None``: vertical, and horizontal when the
+    partitions have signed east errors, as the pooled table's default) from ``parts`` (the
+    partitions the counting read, in dataset order), on ``client`` (Dask) or in this process."""
+    parameters = parameters or ConfidenceParameters()
+    runner = _Local() if client is None else _Dask(client)
+    by_station: dict[str, list[Partition]] = {}
+    for p in parts:
+        by_station.setdefault(p.station, []).append(p)
+    if not parts:
+        raise ValueError("no partition to analyse")
+    tried = ("vertical", "horizontal") if axes is None else tuple(dict.fromkeys(axes))
+    groups = [[(p, tried, _cut(p, time_range)) for p in ps] for ps in by_station.values()]
+    first = _map(
+        runner, groups, _first_task, functools.partial(_by_axis, merge_band_first), progress, "pass 1"
+    )
+    if first.failures:
+        return _failed(tried, first)
+    if axes is None:
+        h = first.partial["horizontal"]
+        tried = ("vertical", "horizontal") if h.has_east and {"east", "north"} <= h.columns else ("vertical",)
+    plans, failed = {}, []
+    for a in tried:
+        try:
+            plans[a] = band_plan(first.partial[a], a, parameters)
+        except ValueError as exc:  # InputError too: a column missing
+            failed.append((a, exc))
+    if not plans:
+        return ConfidenceRun((), tuple(failed))
+    shared = runner.share(plans)
+    groups = [[(p, shared, _cut(p, time_range)) for p in ps] for ps in by_station.values()]
+    second = _map(
+        runner, groups, _second_task, functools.partial(_by_axis, merge_band_second), progress, "pass 2"
+    )
+    if second.failures:
+        return _failed(tried, second)
+    chains = {a: band_chains(plans[a], second.partial[a]) for a in plans}
+    del second
+    by_day: dict = {}
+    for p in parts:
+        by_day.setdefault(p.date, []).append(p)
+    days = [by_day[d] for d in sorted(by_day)]
+    shared_chains = runner.share(chains)
+    walks = [
+        [(days, shared, shared_chains, True, time_range)],
+        [(days[::-1], shared, shared_chains, False, time_range)],
+    ]
+    done = runner.map_reduce(_walk_task, walks, _only, _ticks(progress, "confidence pass 3", 2))
+    failures = [f for d in done for f in d.failures]
+    if failures:
+        return _failed(tried, _Done(None, tuple(failures)))
+    forward, backward = (d.partial for d in done)
+    out = tuple(dataset_confidence(plans[a], chains[a], forward[a], backward[a]) for a in plans)
+    return ConfidenceRun(out, tuple(failed))
+
+
+def _map(runner, groups, task, merge, progress, stage: str) -> _Done:
+    total = sum(map(len, groups))
+    done = runner.map_reduce(task, groups, merge, _ticks(progress, f"confidence {stage}", total))
+    return _merge_done(merge, *done)
+
+
+def _failed(axes: Sequence[str], done: _Done) -> ConfidenceRun:
+    f = done.failures[0]
+    why = f"partition {f.station} {f.date} unreadable in the confidence passes: {f.reason}"
+    return ConfidenceRun((), tuple((a, why) for a in axes))
