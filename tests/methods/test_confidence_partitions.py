@@ -81,7 +81,10 @@ def _random_network(seed: int, *, stations: int = 3, days: int = 3, step_s: floa
 @pytest.mark.parametrize("axis", ["vertical", "horizontal"])
 def test_partitions_equal_the_pooled_table(seed: int, axis: str) -> None:
     table = _random_network(seed)
-    for params in (ConfidenceParameters(min_samples=40), ConfidenceParameters(min_samples=200, spacing=500.0)):
+    for params in (
+        ConfidenceParameters(min_samples=40),
+        ConfidenceParameters(min_samples=200, spacing=500.0),
+    ):
         got = table_confidence(table, axis, params)
         want = confidence_analysis(table, axis=axis, **{k: getattr(params, k) for k in _PARAMS})
         assert_same(got, want)
@@ -118,14 +121,16 @@ def test_ties_in_time_and_error_across_stations() -> None:
     assert_same(table_confidence(table, "vertical", params), want)
     s = want.samples[0]
     mid = t[t.size // 2]
-    assert set(s.station[s.time_us < mid].tolist()) == {2} and set(s.station[s.time_us >= mid].tolist()) == {0}
+    assert set(s.station[s.time_us < mid].tolist()) == {2} and set(s.station[s.time_us >= mid].tolist()) == {
+        0
+    }
 
 
 def test_a_column_missing_on_some_days_and_one_day_without_solution(tmp_path) -> None:
     """A dataset whose partitions differ: east/north absent on one station's days (read as missing
     in the pooled table), a day without any solution."""
     table = _random_network(10, stations=2, days=3)
-    day = (pl.col("time").dt.epoch("us") // DAY_US)
+    day = pl.col("time").dt.epoch("us") // DAY_US
     a = table.filter(pl.col("station") == "S0").drop("east", "north")
     b = table.filter(pl.col("station") == "S1")
     b = b.with_columns(pl.when(day == day.min()).then(None).otherwise(pl.col("vpe")).alias("vpe"))
