@@ -337,7 +337,9 @@ def _analyze_campaign(
     label = title or dataset.name
     evt_done = confidence_done = None
     if not counting_only:
-        confidence_done = _campaign_confidence(dataset, network, methods, client, time_range, progress)
+        confidence_done = _campaign_confidence(
+            dataset, network, methods, columns, client, time_range, progress
+        )
         evt_done = _campaign_evt(dataset, network, levels, methods, client, time_range, progress)
     _release(client)
     if counting_only or not methods.needs_table:  # nothing reads the pooled table
@@ -434,12 +436,14 @@ def _campaign_confidence(
     dataset: Path,
     network: CampaignCounting,
     methods: _Methods,
+    columns: Sequence[str] | None,
     client,
     time_range,
     progress: Callable[[str], None] | None,
 ) -> tuple[tuple[ConfidenceAnalysis, ...], list[tuple[str, str, str]]]:
     """The PL confidence level of each axis asked, from the partitions the counting read (the
-    passes of :mod:`overbound.campaign_confidence`): as of the pooled table, with its failures."""
+    passes of :mod:`overbound.campaign_confidence`): as of the pooled table read with ``columns``,
+    with its failures."""
     from overbound.campaign_confidence import campaign_confidence
 
     if methods.confidence == ():
@@ -451,7 +455,9 @@ def _campaign_confidence(
         if progress:
             progress(f"PL confidence level, {stage}: {done}/{total}")
 
-    run = campaign_confidence(parts, methods.confidence, client=client, time_range=time_range, progress=tick)
+    run = campaign_confidence(
+        parts, methods.confidence, columns=columns, client=client, time_range=time_range, progress=tick
+    )
     return run.done, [
         ("confidence", axis, why if isinstance(why, str) else failure_text(why)) for axis, why in run.failed
     ]

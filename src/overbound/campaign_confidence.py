@@ -17,7 +17,7 @@ import polars as pl
 
 from overbound.campaign import Window, _cut, _Dask, _Done, _failure, _Local, _merge_done, _read, _ticks
 from overbound.io.dataset import Partition
-from overbound.io.schema import InputError
+from overbound.io.schema import REQUIRED, InputError
 from overbound.methods.confidence_level import ConfidenceAnalysis
 from overbound.methods.confidence_partitions import (
     BandChains,
@@ -37,7 +37,8 @@ from overbound.methods.confidence_partitions import (
 
 __all__ = ["ConfidenceRun", "campaign_confidence"]
 
-_EXTRA = ("east", "north", "alert")
+#: The optional columns the method reads (the pooled table's analysis reads those the table has).
+EXTRA = ("east", "north", "alert")
 _ERRORS = (InputError, OSError, pl.exceptions.PolarsError, ValueError)
 
 
@@ -50,9 +51,9 @@ class ConfidenceRun:
     failed: tuple[tuple[str, str | Exception], ...]
 
 
-def _first_task(partition: Partition, axes: tuple[str, ...], window: Window) -> _Done:
+def _first_task(partition: Partition, axes: tuple[str, ...], window: Window, extra: tuple[str, ...]) -> _Done:
     try:
-        table = _read(partition, window, extra=_EXTRA)
+        table = _read(partition, window, REQUIRED, extra)
         out = {a: band_first(table, a, partition.key, partition.station) for a in axes}
     except _ERRORS as exc:
         return _Done(None, (_failure(partition, exc),))
@@ -65,9 +66,11 @@ def _block(partition: Partition, table: pl.DataFrame, plan: BandPlan):
     )
 
 
-def _second_task(partition: Partition, plans: dict[str, BandPlan], window: Window) -> _Done:
+def _second_task(
+    partition: Partition, plans: dict[str, BandPlan], window: Window, extra: tuple[str, ...]
+) -> _Done:
     try:
-        table = _read(partition, window, extra=_EXTRA)
+        table = _read(partition, window, REQUIRED, extra)
         out = {a: band_second(_block(partition, table, p), p) for a, p in plans.items()}
     except _ERRORS as exc:
         return _Done(None, (_failure(partition, exc),))
@@ -80,13 +83,14 @@ def _walk_task(
     chains: dict[str, BandChains],
     forward: bool,
     window: Window,
+    extra: tuple[str, ...],
 ) -> _Done:
     """Pass 3 one way: ``days`` (the partitions of each day) in walking order, each day read once
     for every axis, one day in memory."""
     sweeps = {a: BandSweep(p, chains[a].chains, forward) for a, p in plans.items()}
     try:
         for parts in days:
-            tables = [_read(p, _cut(p, window), extra=_EXTRA) for p in parts]
+            tables = [_read(p, _cut(p, window), REQUIRED, extra) for p in parts]
             for a, sweep in sweeps.items():
                 sweep.day(day_block([_block(p, t, plans[a]) for p, t in zip(parts, tables, strict=True)]))
     except _ERRORS as exc:
@@ -108,31 +112,43 @@ def campaign_confidence(
     axes: Sequence[str] | None,
     *,
     parameters: ConfidenceParameters | None = None,
+    columns: Sequence[str] | None = None,
     client=None,
     time_range: Window = None,
     progress: Callable[[str, int, int], None] | None = None,
 ) -> ConfidenceRun:
     """The PL confidence level of each of ``axes`` (``None``: vertical, and horizontal when the
     partitions have signed east errors, as the pooled table's default) from ``parts`` (the
-    partitions the counting read, in dataset order), on ``client`` (Dask) or in this process."""
+    partitions the counting read, in dataset order), on ``client`` (Dask) or in this process.
+    ``columns``: the optional columns of :data:`EXTRA` read (``None``: all), as the pooled table's
+    analysis sees those the table was read with. An axis asked twice is analysed once."""
     parameters = parameters or ConfidenceParameters()
     runner = _Local() if client is None else _Dask(client)
+    if not parts:
+        raise ValueError("no partition to analyse")
     by_station: dict[str, list[Partition]] = {}
     for p in parts:
         by_station.setdefault(p.station, []).append(p)
-    if not parts:
-        raise ValueError("no partition to analyse")
+    extra = EXTRA if columns is None else tuple(c for c in EXTRA if c in columns)
+    failed: list[tuple[str, str | Exception]] = []
     tried = ("vertical", "horizontal") if axes is None else tuple(dict.fromkeys(axes))
-    groups = [[(p, tried, _cut(p, time_range)) for p in ps] for ps in by_station.values()]
-    first = _map(
-        runner, groups, _first_task, functools.partial(_by_axis, merge_band_first), progress, "pass 1"
-    )
+    for a in tried:  # the axis name and the parameters first, as the pooled analysis checks them
+        try:
+            parameters.check(a)
+        except ValueError as exc:
+            failed.append((a, exc))
+    tried = tuple(a for a in tried if a not in dict(failed))
+    if not tried:
+        return ConfidenceRun((), tuple(failed))
+    merge = functools.partial(_by_axis, merge_band_first)
+    groups = [[(p, tried, _cut(p, time_range), extra) for p in ps] for ps in by_station.values()]
+    first = _map(runner, groups, _first_task, merge, progress, "pass 1")
     if first.failures:
         return _failed(tried, first)
     if axes is None:
         h = first.partial["horizontal"]
         tried = ("vertical", "horizontal") if h.has_east and {"east", "north"} <= h.columns else ("vertical",)
-    plans, failed = {}, []
+    plans = {}
     for a in tried:
         try:
             plans[a] = band_plan(first.partial[a], a, parameters)
@@ -141,10 +157,9 @@ def campaign_confidence(
     if not plans:
         return ConfidenceRun((), tuple(failed))
     shared = runner.share(plans)
-    groups = [[(p, shared, _cut(p, time_range)) for p in ps] for ps in by_station.values()]
-    second = _map(
-        runner, groups, _second_task, functools.partial(_by_axis, merge_band_second), progress, "pass 2"
-    )
+    merge = functools.partial(_by_axis, merge_band_second)
+    groups = [[(p, shared, _cut(p, time_range), extra) for p in ps] for ps in by_station.values()]
+    second = _map(runner, groups, _second_task, merge, progress, "pass 2")
     if second.failures:
         return _failed(tried, second)
     chains = {a: band_chains(plans[a], second.partial[a]) for a in plans}
@@ -155,8 +170,8 @@ def campaign_confidence(
     days = [by_day[d] for d in sorted(by_day)]
     shared_chains = runner.share(chains)
     walks = [
-        [(days, shared, shared_chains, True, time_range)],
-        [(days[::-1], shared, shared_chains, False, time_range)],
+        [(days, shared, shared_chains, True, time_range, extra)],
+        [(days[::-1], shared, shared_chains, False, time_range, extra)],
     ]
     done = runner.map_reduce(_walk_task, walks, _only, _ticks(progress, "confidence pass 3", 2))
     failures = [f for d in done for f in d.failures]

@@ -161,19 +161,39 @@ def test_horizontal_without_east_fails_as_the_pooled_table(tmp_path) -> None:
 def test_dataset_with_a_time_window_equals_the_pooled_table(tmp_path) -> None:
     import datetime as dt
 
+    from overbound.io.open import filter_time
     from overbound.simulate import SimulationConfig, write_simulation_dataset
 
     write_simulation_dataset(SimulationConfig(days=3, interval_s=5.0, stations=2, seed=9), tmp_path / "ds")
     day0 = dt.datetime.combine(partitions(tmp_path / "ds")[0].date, dt.time())
     window = (day0 + dt.timedelta(hours=7.5), day0 + dt.timedelta(days=1, hours=19))  # cuts two days
-    got = analyze([tmp_path / "ds"], confidence=None, evt=(), time_range=window, cache=False)
-    pooled = analyze(
-        [tmp_path / "ds"], confidence=None, evt=(), parametric=True, time_range=window, cache=False
-    )  # the parametric analysis still reads the pooled table: so does the confidence level then
-    assert [c.axis for c in got.confidence] == ["vertical", "horizontal"]
-    for a, b in zip(got.confidence, pooled.confidence, strict=True):
-        assert_same(a, b)
-    assert got.table.is_empty() and not pooled.table.is_empty()
+    got = analyze([tmp_path / "ds"], confidence=None, evt=(), time_range=window, cache=False, columns=None)
+    pooled, _ = read_dataset(tmp_path / "ds", columns=("east", "north", "alert"))
+    pooled = filter_time(pooled, window)
+    assert [c.axis for c in got.confidence] == ["vertical", "horizontal"] and got.table.is_empty()
+    for a in got.confidence:
+        assert_same(a, confidence_analysis(pooled, axis=a.axis))
+
+
+def test_the_columns_read_and_a_wrong_axis_as_for_the_pooled_table(tmp_path) -> None:
+    """``analyze(DATASET, columns=...)`` sees the optional columns a pooled table read with them
+    would have (without ``alert`` alerted epochs count, without east/north no horizontal axis);
+    an unknown axis is a method failure with the pooled analysis' reason, the others go on."""
+    table = _random_network(4, stations=2, days=2)
+    table.write_parquet(tmp_path / "a.parquet")
+    ds = tmp_path / "ds"
+    ingest(ds, [tmp_path / "a.parquet"])
+    for columns in ((), ("alert",), ("east", "north")):
+        got = analyze([ds], confidence=None, evt=(), columns=columns, cache=False)
+        want = analyze(read_dataset(ds, columns=columns)[0], confidence=None, evt=())
+        assert [c.axis for c in got.confidence] == [c.axis for c in want.confidence]
+        for a, b in zip(got.confidence, want.confidence, strict=True):
+            assert_same(a, b)
+    assert [c.axis for c in want.confidence] == ["vertical", "horizontal"]
+    got = analyze([ds], confidence=("vertical", "Horizontal"), evt=(), columns=("alert",), cache=False)
+    want = analyze(read_dataset(ds, columns=("alert",))[0], confidence=("vertical", "Horizontal"), evt=())
+    assert [c.axis for c in got.confidence] == ["vertical"] and got.method_failures == want.method_failures
+    assert "axis must be 'vertical' or 'horizontal'" in got.method_failures[0][2]
 
 
 @pytest.mark.parametrize("seed", range(40))

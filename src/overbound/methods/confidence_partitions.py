@@ -65,12 +65,14 @@ __all__ = [
     "band_first",
     "band_plan",
     "band_second",
+    "concat_blocks",
     "dataset_confidence",
     "day_block",
     "merge_band_first",
     "merge_band_second",
     "merge_picks",
     "table_confidence",
+    "take",
     "walk",
 ]
 
@@ -140,28 +142,37 @@ def band_block(table: pl.DataFrame, axis: str, station: int, row0: int | np.ndar
     )
 
 
+def take(b: BandBlock, index) -> BandBlock:
+    """The epochs ``index`` (an index array or a slice) of a block."""
+    return BandBlock(
+        b.t[index],
+        b.pl[index],
+        b.error[index],
+        tuple(x[index] for x in b.signed),
+        b.station[index],
+        b.row[index],
+    )
+
+
+def concat_blocks(blocks: Sequence[BandBlock]) -> BandBlock:
+    """Blocks concatenated in order."""
+    return BandBlock(
+        np.concatenate([b.t for b in blocks]),
+        np.concatenate([b.pl for b in blocks]),
+        np.concatenate([b.error for b in blocks]),
+        tuple(np.concatenate(x) for x in zip(*(b.signed for b in blocks), strict=True)),
+        np.concatenate([b.station for b in blocks]),
+        np.concatenate([b.row for b in blocks]),
+    )
+
+
 def day_block(blocks: Sequence[BandBlock]) -> BandBlock:
     """The blocks of one day merged in time order, ties in pooled row order (a stable sort of the
     pooled table by time)."""
-    t = np.concatenate([b.t for b in blocks])
-    row = np.concatenate([b.row for b in blocks])
-    if np.all(row[1:] > row[:-1]):  # blocks in pooled row order (a dataset): sorted runs, merged
-        order = np.argsort(t, kind="stable")
-    else:
-        order = np.lexsort((row, t))
-
-    def cat(get) -> np.ndarray:
-        return np.concatenate([get(b) for b in blocks])[order]
-
-    n_signed = len(blocks[0].signed)
-    return BandBlock(
-        t[order],
-        cat(lambda b: b.pl),
-        cat(lambda b: b.error),
-        tuple(cat(lambda b, i=i: b.signed[i]) for i in range(n_signed)),
-        cat(lambda b: b.station),
-        cat(lambda b: b.row),
-    )
+    b = concat_blocks(blocks)
+    if np.all(b.row[1:] > b.row[:-1]):  # blocks in pooled row order (a dataset): sorted runs, merged
+        return take(b, np.argsort(b.t, kind="stable"))
+    return take(b, np.lexsort((b.row, b.t)))
 
 
 # --- pass 1 --------------------------------------------------------------------------------------
@@ -441,12 +452,7 @@ class Picks:
     """Samples of the chains, with the chain (index into :attr:`BandChains.chains`) of each."""
 
     chain: np.ndarray
-    t: np.ndarray
-    pl: np.ndarray
-    error: np.ndarray
-    signed: tuple[np.ndarray, ...]
-    station: np.ndarray
-    row: np.ndarray
+    samples: BandBlock
 
 
 class BandSweep:
@@ -502,9 +508,7 @@ class BandSweep:
             self.theta[active] = b.t[best] + (spacing if self.forward else -spacing)
         if chain:
             c, i = np.concatenate(chain), np.concatenate(at)
-            self._picks.append(
-                Picks(c, b.t[i], b.pl[i], b.error[i], tuple(x[i] for x in b.signed), b.station[i], b.row[i])
-            )
+            self._picks.append(Picks(c, take(b, i)))
 
     def _next(self, active: np.ndarray, t: np.ndarray, keys: np.ndarray, n: int):
         """Per active chain: whether it has a next sample today, and its position in the day."""
@@ -535,22 +539,13 @@ class BandSweep:
 
 
 def _no_picks(n_signed: int) -> Picks:
-    e = np.empty(0, dtype=np.int64)
-    f = np.empty(0)
-    return Picks(e, e, f, f, tuple(f for _ in range(n_signed)), e, e)
+    e, f = np.empty(0, dtype=np.int64), np.empty(0)
+    return Picks(e, BandBlock(e, f, f, tuple(f for _ in range(n_signed)), e, e))
 
 
 def merge_picks(*parts: Picks) -> Picks:
     """Picks concatenated in order."""
-    return Picks(
-        np.concatenate([p.chain for p in parts]),
-        np.concatenate([p.t for p in parts]),
-        np.concatenate([p.pl for p in parts]),
-        np.concatenate([p.error for p in parts]),
-        tuple(np.concatenate(x) for x in zip(*(p.signed for p in parts), strict=True)),
-        np.concatenate([p.station for p in parts]),
-        np.concatenate([p.row for p in parts]),
-    )
+    return Picks(np.concatenate([p.chain for p in parts]), concat_blocks([p.samples for p in parts]))
 
 
 # --- finish --------------------------------------------------------------------------------------
@@ -564,7 +559,7 @@ def dataset_confidence(
     backward walk reversed, then the forward), its statistics (step 6)."""
     p = plan.parameters
     both = merge_picks(_reverse(backward), forward)
-    order = np.argsort(both.chain, kind="stable")
+    order = np.argsort(both.chain, kind="stable")  # each chain's samples in time order
     bounds = np.searchsorted(both.chain[order], np.arange(len(chains.chains) + 1))
     walked: dict[tuple[int, int], np.ndarray] = {}
     for i, c in enumerate(chains.chains):
@@ -577,13 +572,14 @@ def dataset_confidence(
             last,
         )
         idx = walked.get((k, j), np.empty(0, dtype=np.intp))
+        chosen = take(both.samples, idx)
         bin_, band = samples_bin(
-            both.t[idx],
-            both.row[idx],
-            both.station[idx],
-            both.pl[idx],
-            both.error[idx],
-            tuple(x[idx] for x in both.signed),
+            chosen.t,
+            chosen.row,
+            chosen.station,
+            chosen.pl,
+            chosen.error,
+            chosen.signed,
             axis=plan.axis,
             target=target,
             width=float(plan.widths[j]),
@@ -614,8 +610,7 @@ def dataset_confidence(
 
 def _reverse(p: Picks) -> Picks:
     r = slice(None, None, -1)
-    signed = tuple(x[r] for x in p.signed)
-    return Picks(p.chain[r], p.t[r], p.pl[r], p.error[r], signed, p.station[r], p.row[r])
+    return Picks(p.chain[r], take(p.samples, r))
 
 
 def walk(plan: BandPlan, chains: BandChains, days: Iterable[BandBlock], forward: bool) -> Picks:
@@ -633,6 +628,7 @@ def table_confidence(
     stations, ``parameters`` or its defaults) by the passes of a dataset over its station-days
     (stations in order of first appearance, days in order): equal to it to the last bit."""
     parameters = parameters or ConfidenceParameters()
+    parameters.check(axis)
     stations = table["station"].cast(pl.String)
     day = as_numpy(table["time"]).astype(np.int64) // _DAY_US
     blocks = []  # (station, day, key, rows)
