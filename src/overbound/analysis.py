@@ -14,7 +14,7 @@ import polars as pl
 
 from overbound._allocator import release_freed_memory
 from overbound.campaign import CampaignCounting, count_campaign, partitions_in
-from overbound.io.dataset import is_dataset, read_dataset, read_manifest
+from overbound.io.dataset import Partition, is_dataset, read_dataset, read_manifest
 from overbound.io.geodesy import Reference
 from overbound.io.open import Source, filter_time, read, source_name
 from overbound.io.schema import InputError, ReadReport, validate_epochs
@@ -336,11 +336,11 @@ def _analyze_campaign(
     report = _campaign_report(dataset, network)
     label = title or dataset.name
     evt_done = confidence_done = None
-    if not counting_only:
-        confidence_done = _campaign_confidence(
-            dataset, network, methods, columns, client, time_range, progress
-        )
-        evt_done = _campaign_evt(dataset, network, levels, methods, client, time_range, progress)
+    if not counting_only:  # the methods by partition read the partitions the counting read
+        failed_keys = {f.key for f in network.failures}
+        parts = [p for p in partitions_in(dataset, time_range) if p.key not in failed_keys]
+        confidence_done = _campaign_confidence(parts, methods, columns, client, time_range, progress)
+        evt_done = _campaign_evt(parts, levels, methods, client, time_range, progress)
     _release(client)
     if counting_only or not methods.needs_table:  # nothing reads the pooled table
         done, failed = evt_done or ((), ())
@@ -376,8 +376,7 @@ def _analyze_campaign(
 
 
 def _campaign_evt(
-    dataset: Path,
-    network: CampaignCounting,
+    parts: list[Partition],
     levels: tuple[ServiceLevel, ...],
     methods: _Methods,
     client,
@@ -392,8 +391,6 @@ def _campaign_evt(
     asked = ("vertical", "horizontal") if methods.evt is None else tuple(dict.fromkeys(methods.evt))
     if not asked:
         return (), ()
-    failed_keys = {f.key for f in network.failures}
-    parts = [p for p in partitions_in(dataset, time_range) if p.key not in failed_keys]
     specs = {a: tuple(_service_spec(s) for s in levels if s.alert_limit(a) is not None) for a in asked}
 
     def tick(stage: str, done: int, total: int) -> None:
@@ -433,8 +430,7 @@ def _campaign_evt(
 
 
 def _campaign_confidence(
-    dataset: Path,
-    network: CampaignCounting,
+    parts: list[Partition],
     methods: _Methods,
     columns: Sequence[str] | None,
     client,
@@ -448,8 +444,6 @@ def _campaign_confidence(
 
     if methods.confidence == ():
         return (), []
-    failed_keys = {f.key for f in network.failures}
-    parts = [p for p in partitions_in(dataset, time_range) if p.key not in failed_keys]
 
     def tick(stage: str, done: int, total: int) -> None:
         if progress:

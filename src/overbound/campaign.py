@@ -410,6 +410,18 @@ def _bounds_task(partition: Partition, plan: SecondPlan, use_cache: bool, window
     return _Done(SecondPass({}, values), cached=int(hit), computed=int(not hit))
 
 
+def _by_axis(merge: Callable, *parts: dict) -> dict:
+    """Per-axis partials (``{axis: partial}``) merged axis by axis."""
+    return {a: merge(*(p[a] for p in parts)) for a in parts[0]}
+
+
+def _map_merged(runner, groups, task, merge, progress, stage: str) -> _Done:
+    """``task`` over the groups of task arguments (a station's partitions each), each group merged,
+    then the groups merged in order; ``progress(stage, done, total)`` counts the tasks."""
+    ticks = _ticks(progress, stage, sum(map(len, groups)))
+    return _merge_done(merge, *runner.map_reduce(task, groups, merge, ticks))
+
+
 def _merge_done(merge: Callable, *parts: _Done) -> _Done:
     ok = [p.partial for p in parts if p.partial is not None]
     return _Done(

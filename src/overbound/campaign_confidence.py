@@ -15,7 +15,19 @@ from dataclasses import dataclass
 
 import polars as pl
 
-from overbound.campaign import Window, _cut, _Dask, _Done, _failure, _Local, _merge_done, _read, _ticks
+from overbound.campaign import (
+    Window,
+    _by_axis,
+    _by_station,
+    _cut,
+    _Dask,
+    _Done,
+    _failure,
+    _Local,
+    _map_merged,
+    _read,
+    _ticks,
+)
 from overbound.io.dataset import Partition
 from overbound.io.schema import REQUIRED, InputError
 from overbound.methods.confidence_level import ConfidenceAnalysis
@@ -103,10 +115,6 @@ def _only(partial):
     return partial
 
 
-def _by_axis(merge: Callable, *parts: dict) -> dict:
-    return {a: merge(*(p[a] for p in parts)) for a in parts[0]}
-
-
 def campaign_confidence(
     parts: Sequence[Partition],
     axes: Sequence[str] | None,
@@ -126,9 +134,7 @@ def campaign_confidence(
     runner = _Local() if client is None else _Dask(client)
     if not parts:
         raise ValueError("no partition to analyse")
-    by_station: dict[str, list[Partition]] = {}
-    for p in parts:
-        by_station.setdefault(p.station, []).append(p)
+    by_station = _by_station(list(parts))
     extra = EXTRA if columns is None else tuple(c for c in EXTRA if c in columns)
     failed: list[tuple[str, str | Exception]] = []
     tried = ("vertical", "horizontal") if axes is None else tuple(dict.fromkeys(axes))
@@ -142,7 +148,7 @@ def campaign_confidence(
         return ConfidenceRun((), tuple(failed))
     merge = functools.partial(_by_axis, merge_band_first)
     groups = [[(p, tried, _cut(p, time_range), extra) for p in ps] for ps in by_station.values()]
-    first = _map(runner, groups, _first_task, merge, progress, "pass 1")
+    first = _map_merged(runner, groups, _first_task, merge, progress, "confidence pass 1")
     if first.failures:
         return _failed(tried, first)
     if axes is None:
@@ -159,7 +165,7 @@ def campaign_confidence(
     shared = runner.share(plans)
     merge = functools.partial(_by_axis, merge_band_second)
     groups = [[(p, shared, _cut(p, time_range), extra) for p in ps] for ps in by_station.values()]
-    second = _map(runner, groups, _second_task, merge, progress, "pass 2")
+    second = _map_merged(runner, groups, _second_task, merge, progress, "confidence pass 2")
     if second.failures:
         return _failed(tried, second)
     chains = {a: band_chains(plans[a], second.partial[a]) for a in plans}
@@ -180,12 +186,6 @@ def campaign_confidence(
     forward, backward = (d.partial for d in done)
     out = tuple(dataset_confidence(plans[a], chains[a], forward[a], backward[a]) for a in plans)
     return ConfidenceRun(out, tuple(failed))
-
-
-def _map(runner, groups, task, merge, progress, stage: str) -> _Done:
-    total = sum(map(len, groups))
-    done = runner.map_reduce(task, groups, merge, _ticks(progress, f"confidence {stage}", total))
-    return _merge_done(merge, *done)
 
 
 def _failed(axes: Sequence[str], done: _Done) -> ConfidenceRun:

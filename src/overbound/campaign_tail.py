@@ -20,13 +20,15 @@ import polars as pl
 
 from overbound.campaign import (
     Window,
+    _by_axis,
+    _by_station,
     _cut,
     _Dask,
     _Done,
     _failure,
     _file_key,
     _Local,
-    _merge_done,
+    _map_merged,
     _read,
     _ticks,
 )
@@ -76,11 +78,6 @@ def _first_task(partition: Partition, filters: dict[str, tuple[Filter, ...]], wi
     except (InputError, OSError, pl.exceptions.PolarsError, ValueError) as exc:
         return _Done(None, (_failure(partition, exc),))
     return _Done(out, computed=1)
-
-
-def _by_axis(merge: Callable, *parts: dict) -> dict:
-    """Per-axis partials merged axis by axis."""
-    return {a: merge(*(p[a] for p in parts)) for a in parts[0]}
 
 
 #: The last partitions read by pass 2 in this process (path, key, window, table): a task reads its
@@ -153,18 +150,14 @@ def campaign_tail_data(
     if any(f[0][0] is not None for f in filters.values()):  # pass 1 would need the next day's alerts
         raise ValueError("the main series of a dataset's EVT is not filtered by a service (tail_filters)")
     runner = _Local() if client is None else _Dask(client)
-    by_station: dict[str, list[Partition]] = {}
-    for p in parts:
-        by_station.setdefault(p.station, []).append(p)
-    total = len(parts)
-    first = _map(
+    by_station = _by_station(list(parts))
+    first = _map_merged(
         runner,
         [[(p, filters, _cut(p, time_range)) for p in ps] for ps in by_station.values()],
         _first_task,
         functools.partial(_by_axis, merge_tail_first),
         progress,
         "EVT pass 1",
-        total,
     )
     if first.failures:
         return _failed(filters, first)
@@ -185,14 +178,8 @@ def campaign_tail_data(
     items = [
         [(p, _before(plans, by_key, p.key), shared, time_range) for p in ps] for ps in by_station.values()
     ]
-    second = _map(
-        runner,
-        items,
-        _second_task,
-        functools.partial(_by_axis, merge_tail_second),
-        progress,
-        "EVT pass 2",
-        total,
+    second = _map_merged(
+        runner, items, _second_task, functools.partial(_by_axis, merge_tail_second), progress, "EVT pass 2"
     )
     if second.failures:
         return _failed(filters, second)
@@ -240,11 +227,6 @@ def _spaced(runner, by_station, walks: dict[str, tuple], window, progress) -> di
         f = failures[0]
         raise InputError(f"{f.station} {f.date}", f"unreadable in the EVT pass 3: {f.reason}")
     return concat_by_axis(*(d.partial for d in done if d.partial is not None))
-
-
-def _map(runner, groups, task, merge, progress, stage: str, total: int) -> _Done:
-    """``task`` over the groups (stations), each merged, then the stations merged in order."""
-    return _merge_done(merge, *runner.map_reduce(task, groups, merge, _ticks(progress, stage, total)))
 
 
 def _failed(filters: dict, done: _Done) -> TailInputs:

@@ -95,6 +95,16 @@ def test_partitions_equal_the_pooled_table(seed: int, axis: str) -> None:
 _PARAMS = ("min_samples", "spacing", "tolerance", "step", "max_pl", "max_tolerance", "risk", "core")
 
 
+def test_the_parameters_default_to_those_of_the_pooled_analysis() -> None:
+    """``ConfidenceParameters`` repeats the defaults of ``confidence_analysis``: they must not drift."""
+    import inspect
+
+    defaults = inspect.signature(confidence_analysis).parameters
+    assert {k: defaults[k].default for k in _PARAMS} == {
+        k: getattr(ConfidenceParameters(), k) for k in _PARAMS
+    }
+
+
 def test_ties_in_time_and_error_across_stations() -> None:
     """Three stations with the same times and the same errors, the largest at mid-span: the anchor
     is the earliest row of the pooled table (station C), forward picks the first station at a

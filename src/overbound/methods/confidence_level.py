@@ -383,9 +383,8 @@ def confidence_analysis(
     bins: list[ConfidenceBin] = []
     samples: list[BandSamples] = []
     pl_min = float(data.pl_sorted[0]) if data.pl_sorted.size else math.nan
-    for k in range(
-        target_count(pl_min, max_pl, step)
-    ):  # a loop over ~200 bands; everything inside is vectorised
+    # a loop over ~200 bands; everything inside is vectorised
+    for k in range(target_count(pl_min, max_pl, step)):
         target = pl_min + k * step
         chosen, width, n_cand = _select_band(data, target, widths, spacing_us, min_samples)
         bin_, band = _band_statistics(

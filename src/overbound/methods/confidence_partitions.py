@@ -41,6 +41,7 @@ import polars as pl
 from overbound.io.schema import as_numpy
 from overbound.methods.confidence_level import (
     _COLUMNS,
+    _COMPONENTS,
     ConfidenceAnalysis,
     analysed_columns,
     band_widths,
@@ -95,11 +96,18 @@ class ConfidenceParameters:
 
     def check(self, axis: str) -> None:
         """Raise ``ValueError`` as the pooled analysis does; also for ``spacing = 0`` (no chain)."""
-        p = self
         validate_parameters(
-            axis, p.min_samples, p.spacing, p.tolerance, p.step, p.max_pl, p.max_tolerance, p.risk, p.core
+            axis,
+            self.min_samples,
+            self.spacing,
+            self.tolerance,
+            self.step,
+            self.max_pl,
+            self.max_tolerance,
+            self.risk,
+            self.core,
         )
-        if round(p.spacing * 1e6) <= 0:
+        if self.spacing_us <= 0:
             raise ValueError("a dataset's confidence analysis needs spacing > 0 (the samples are chained)")
 
     @property
@@ -125,21 +133,31 @@ def band_block(table: pl.DataFrame, axis: str, station: int, row0: int | np.ndar
     """The :class:`BandBlock` of ``axis`` of a station-day whose first row is ``row0`` of the pooled
     table (or whose rows are ``row0``); a column the station-day lacks is read as missing values
     (as in the pooled table)."""
-    cols = set(table.columns)
-    need = [c for c in _COLUMNS[axis] if c not in cols]
-    if need:
-        table = table.with_columns(pl.lit(None, dtype=pl.Float64).alias(c) for c in need)
-    ok, pl_, err, signed = analysed_columns(table, axis)
+    ok, pl_, err, signed = _analysed(table, axis)
     rows = np.flatnonzero(ok)
-    t = as_numpy(table["time"]).astype(np.int64, copy=False)[rows]
     return BandBlock(
-        t,
+        _times(table)[rows],
         pl_[rows],
         err[rows],
         tuple(s[rows] for s in signed),
         np.full(rows.size, station, dtype=np.int64),
         rows.astype(np.int64) + row0 if isinstance(row0, int) else np.asarray(row0, dtype=np.int64)[rows],
     )
+
+
+def _analysed(
+    table: pl.DataFrame, axis: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[np.ndarray, ...]]:
+    """:func:`~overbound.methods.confidence_level.analysed_columns` of a station-day, a column it
+    lacks read as missing values (as in the pooled table)."""
+    need = [c for c in _COLUMNS[axis] if c not in table.columns]
+    if need:
+        table = table.with_columns(pl.lit(None, dtype=pl.Float64).alias(c) for c in need)
+    return analysed_columns(table, axis)
+
+
+def _times(table: pl.DataFrame) -> np.ndarray:
+    return as_numpy(table["time"]).astype(np.int64, copy=False)
 
 
 def take(b: BandBlock, index) -> BandBlock:
@@ -197,16 +215,18 @@ class BandFirst:
 
 def band_first(table: pl.DataFrame, axis: str, key: str, station: str) -> BandFirst:
     """Pass 1 of one station-day."""
-    b = band_block(table, axis, 0, 0)
+    ok, pl_, _, _ = _analysed(table, axis)
+    n = int(np.count_nonzero(ok))
+    t = _times(table)[ok]
     east = "east" in table.columns and bool(table["east"].is_not_nan().any())
     return BandFirst(
         (key,),
         (station,),
         (table.height,),
-        int(b.t.size),
-        float(b.pl.min()) if b.t.size else math.inf,
-        int(b.t.min()) if b.t.size else _INF,
-        int(b.t.max()) if b.t.size else -_INF,
+        n,
+        float(pl_[ok].min()) if n else math.inf,
+        int(t.min()) if n else _INF,
+        int(t.max()) if n else -_INF,
         frozenset(table.columns),
         east,
     )
@@ -386,11 +406,9 @@ class Chain:
 
 @dataclass(frozen=True)
 class BandChains:
-    """Per target and width: the candidates and the slots they occupy (``-1``: not counted, a
-    narrower width was certain); the chains to walk."""
+    """Per target and width the candidates; the chains to walk."""
 
     n_candidates: np.ndarray
-    slots: np.ndarray
     chains: tuple[Chain, ...]
 
 
@@ -412,7 +430,6 @@ def band_chains(plan: BandPlan, second: BandSecond) -> BandChains:
     cum = np.concatenate([[0], np.cumsum(second.count)])
     n_cand = cum[plan.hi] - cum[plan.lo]
     bounds = np.searchsorted(second.codes, np.arange(plan.n_slices + 1) * plan.n_slots)
-    slots = np.full((n_t, n_w), -1, dtype=np.int64)
     seen = np.zeros(plan.n_slots, dtype=bool)
     chains: list[Chain] = []
     for k in range(n_t):  # ~200 targets; the slices of a target's widths are marked incrementally
@@ -425,7 +442,6 @@ def band_chains(plan: BandPlan, second: BandSecond) -> BandChains:
                 count += int(np.count_nonzero(~seen[codes]))
                 seen[codes] = True
             a, b = lo, hi
-            slots[k, j] = count
             last = j == n_w - 1
             if count < p.min_samples and not last:
                 continue
@@ -434,7 +450,7 @@ def band_chains(plan: BandPlan, second: BandSecond) -> BandChains:
                 chains.append(Chain(k, j, lo, hi, int(second.t[anchor]), int(second.row[anchor])))
             if count >= 2 * (p.min_samples + 1):
                 break
-    return BandChains(n_cand, slots, tuple(chains))
+    return BandChains(n_cand, tuple(chains))
 
 
 def _anchor(second: BandSecond, lo: int, hi: int) -> int:
@@ -534,7 +550,7 @@ class BandSweep:
     def picks(self) -> Picks:
         """The samples found, in walking order (by day, then by step)."""
         if not self._picks:
-            return _no_picks(max(len(_COLUMNS[self.plan.axis]) - 2, 1))
+            return _no_picks(len(_COMPONENTS[self.plan.axis]))
         return merge_picks(*self._picks)
 
 
@@ -637,13 +653,9 @@ def table_confidence(
         days = day[rows]
         for d in np.unique(days).tolist():
             blocks.append((name, d, f"{name}/{d}", rows[days == d]))
-    first = (
-        merge_band_first(*(band_first(table[r], axis, key, name) for name, _, key, r in blocks))
-        if blocks
-        else None
-    )
-    if first is None:
+    if not blocks:
         raise ValueError("the epoch table is empty")
+    first = merge_band_first(*(band_first(table[r], axis, key, name) for name, _, key, r in blocks))
     plan = band_plan(first, axis, parameters)
     parts = [band_block(table[r], axis, plan.station_index.get(name, -1), r) for name, _, _, r in blocks]
     chains = band_chains(plan, merge_band_second(*(band_second(b, plan) for b in parts)))
