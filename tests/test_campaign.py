@@ -241,23 +241,24 @@ def test_verdicts_by_partition_on_a_real_scheduler_equal_one_file(
     assert file_doc["verdicts_by_station"] == ds_doc["verdicts_by_station"]
 
 
-def test_evt_and_confidence_by_partition_on_a_real_scheduler_equal_one_file(
+def test_methods_by_partition_on_a_real_scheduler_equal_one_file(
     dataset: Path, tmp_path: Path, scheduler
 ) -> None:
-    """The EVT tail extrapolation and the PL confidence level reduce the partitions (their passes
-    on the two ``dask worker`` processes, no pooled table read): their JSON files and the summary,
-    verdicts included, equal those of the same epochs as one file."""
+    """The EVT tail extrapolation, the PL confidence level and the parametric analysis reduce the
+    partitions (their passes on the two ``dask worker`` processes, no pooled table read): their JSON
+    files and the summary, verdicts included, equal those of the same epochs as one file."""
     from overbound.io.table import write_epochs
 
     table, _ = read_dataset(dataset)
     one = tmp_path / "network.parquet"
     write_epochs(table, one)
     ds = _copy(dataset, tmp_path)
-    common = ["--no-parametric"]
-    file_doc = _analyze([str(one), "-o", str(tmp_path / "file"), *common])
-    ds_doc = _analyze([str(ds), "-o", str(tmp_path / "dataset"), "--scheduler", scheduler, *common])
+    file_doc = _analyze([str(one), "-o", str(tmp_path / "file")])
+    ds_doc = _analyze([str(ds), "-o", str(tmp_path / "dataset"), "--scheduler", scheduler])
     ds_doc.pop("network")
     assert _numbers(file_doc) == _numbers(ds_doc)
+    by_file, by_parts = ((tmp_path / d / "parametric.json").read_text() for d in ("file", "dataset"))
+    assert by_file == by_parts and json.loads(by_parts)["vertical"]["weibull"]
     for axis in ("vertical", "horizontal"):
         name = f"evt-{axis}.json"
         by_file, by_parts = (json.loads((tmp_path / d / name).read_text()) for d in ("file", "dataset"))
@@ -297,7 +298,7 @@ def test_time_window_reads_the_days_it_needs_and_cuts_the_edges(dataset: Path, t
     assert_same(result.counting, count_kpis(table, SERVICES))
 
 
-def test_counting_only_refuses_to_write_the_pooled_table(dataset: Path, tmp_path: Path) -> None:
+def test_a_dataset_refuses_to_write_the_pooled_table(dataset: Path, tmp_path: Path) -> None:
     from click.testing import CliRunner
 
     from overbound.cli import main
@@ -311,28 +312,20 @@ def test_counting_only_refuses_to_write_the_pooled_table(dataset: Path, tmp_path
         str(tmp_path / "e.parquet"),
     ]
     res = CliRunner().invoke(main, ["analyze", *args])
-    assert res.exit_code == 2 and "--counting-only does not read" in res.output
+    assert res.exit_code == 2 and "a dataset's analysis does not read" in res.output
     assert not (tmp_path / "out").exists() and not (tmp_path / "e.parquet").exists()
 
 
-def test_methods_that_would_not_fit_in_memory_are_refused_before_any_work(
-    dataset: Path, tmp_path: Path
-) -> None:
-    """The parametric analysis still reads the pooled table: a dataset whose table it could not hold
-    is refused up front, naming the option that analyses the rest by partition; nothing is counted
-    or cached."""
-    from overbound.analysis import METHODS_BYTES_PER_EPOCH, analyze
-    from overbound.io.schema import InputError
+def test_no_method_reads_the_pooled_table(dataset: Path, tmp_path: Path, monkeypatch) -> None:
+    """Every method runs by partition: analysing a dataset with all of them never reads it whole."""
+    import overbound.io.dataset as io_dataset
+    from overbound.analysis import analyze
 
-    ds = _copy(dataset, tmp_path)
-    table, _ = read_dataset(ds)
-    need = table.height * METHODS_BYTES_PER_EPOCH
-    with pytest.raises(InputError, match="--no-parametric"):
-        analyze([ds], parametric=True, memory_limit=need - 1)
-    assert not list(ds.rglob(".overbound"))
-    done = analyze([ds], parametric=True, evt=(), memory_limit=need)  # fits: run
-    assert done.parametric and done.evidence is not None
-    # without the method that reads it (the others reduce the partitions), no pooled table, no limit
-    assert analyze([ds], memory_limit=0).evidence is not None
-    assert analyze([ds], evt=None, evt_n_boot=20, memory_limit=0).evt
-    assert analyze([ds], confidence=None, memory_limit=0).confidence
+    def refuse(*args, **kwargs):
+        raise AssertionError("the pooled table was read")
+
+    monkeypatch.setattr(io_dataset, "read_dataset", refuse)
+    monkeypatch.setattr("overbound.io.open.read_dataset", refuse)
+    done = analyze([_copy(dataset, tmp_path)], confidence=None, evt=None, evt_n_boot=20, parametric=True)
+    assert done.parametric.vertical and done.parametric.horizontal and done.evt and done.confidence
+    assert done.table.height == 0 and not done.method_failures

@@ -14,9 +14,9 @@ import polars as pl
 
 from overbound._allocator import release_freed_memory
 from overbound.campaign import CampaignCounting, count_campaign, partitions_in
-from overbound.io.dataset import Partition, is_dataset, read_dataset, read_manifest
+from overbound.io.dataset import Partition, is_dataset, read_manifest
 from overbound.io.geodesy import Reference
-from overbound.io.open import Source, filter_time, read, source_name
+from overbound.io.open import Source, read, source_name
 from overbound.io.schema import InputError, ReadReport, validate_epochs
 from overbound.methods.confidence_level import ConfidenceAnalysis, confidence_analysis
 from overbound.methods.counting import CountingResult, count_kpis
@@ -147,7 +147,6 @@ def analyze(
     client=None,
     counting_only: bool = False,
     cache: bool = True,
-    memory_limit: int | None = None,
 ) -> Analysis:
     """Read ``inputs`` (or take an epoch table) and count the KPIs for each service.
 
@@ -177,10 +176,9 @@ def analyze(
     partition by partition (:func:`~overbound.campaign.count_campaign` on ``client``, a
     ``distributed.Client``, or in this process when ``None``; partials cached unless
     ``cache=False``): the same counting and verdicts' evidence as of its pooled table, in memory
-    bounded by a partition. The methods still read the pooled table: with none asked (or with
-    ``counting_only``, which also skips the evidence: no verdicts) it is not read; a dataset whose
-    pooled table the methods would need more than ``memory_limit`` bytes for (default: the memory
-    available; :data:`METHODS_BYTES_PER_EPOCH` per epoch) is refused before any work.
+    bounded by a partition, and so are the methods (:mod:`overbound.campaign_confidence`,
+    :mod:`overbound.campaign_tail`, :mod:`overbound.campaign_parametric`): the pooled table is never
+    read. ``counting_only`` skips the evidence (no verdicts) and the methods.
     """
     methods = _Methods(confidence, evt, evt_n_boot, evt_seed, parametric)
     if _is_campaign(inputs, format):
@@ -200,7 +198,6 @@ def analyze(
             client=client,
             cache=cache,
             counting_only=counting_only,
-            memory_limit=memory_limit,
             progress=progress,
         )
     if isinstance(inputs, pl.DataFrame):
@@ -240,12 +237,6 @@ class _Methods:
         """No method asked: the counting and its evidence only."""
         return not self.parametric and self.evt is not None and not self.evt and self.confidence == ()
 
-    @property
-    def needs_table(self) -> bool:
-        """A method that still reads the pooled table of a dataset is asked (the parametric
-        analysis); the PL confidence level and the EVT reduce the partitions."""
-        return self.parametric
-
 
 def _with_methods(
     table: pl.DataFrame,
@@ -255,31 +246,19 @@ def _with_methods(
     label: str,
     methods: _Methods,
     progress: Callable[[str], None] | None,
-    network: CampaignCounting | None = None,
-    evidence: Evidence | None = None,
-    evt_done: tuple[tuple[TailAnalysis, ...], tuple[tuple[str, str], ...]] | None = None,
-    confidence_done: tuple[tuple[ConfidenceAnalysis, ...], list[tuple[str, str, str]]] | None = None,
 ) -> Analysis:
-    """The analysis of ``table`` with its ``counting`` done: the evidence (unless given) and the
-    methods asked (the EVT's and the confidence level's results when given: a dataset's, by
-    partition)."""
-    if evidence is None:
-        evidence = counted_evidence(table, counting, levels)
+    """The analysis of ``table`` with its ``counting`` done: the evidence and the methods asked."""
+    evidence = counted_evidence(table, counting, levels)
     confidence, evt, parametric = methods.confidence, methods.evt, methods.parametric
-    if confidence_done is None:
-        axes = _confidence_axes(table) if confidence is None else tuple(confidence)
-        if axes and progress:
-            progress("PL confidence level")
-        failures: list[tuple[str, str, str]] = []
-        cl = tuple(
-            c for a in axes if (c := _guarded(failures, "confidence", a, confidence_analysis, table, axis=a))
-        )
-    else:
-        cl, failures = confidence_done[0], list(confidence_done[1])
-    if evt_done is None:
-        evt_axes = _evt_axes(table) if evt is None else tuple(dict.fromkeys(evt))
-        evt_done = _run_evt(table, evt_axes, levels, methods.evt_n_boot, methods.evt_seed, progress)
-    done, failed = evt_done
+    axes = _confidence_axes(table) if confidence is None else tuple(confidence)
+    if axes and progress:
+        progress("PL confidence level")
+    failures: list[tuple[str, str, str]] = []
+    cl = tuple(
+        c for a in axes if (c := _guarded(failures, "confidence", a, confidence_analysis, table, axis=a))
+    )
+    evt_axes = _evt_axes(table) if evt is None else tuple(dict.fromkeys(evt))
+    done, failed = _run_evt(table, evt_axes, levels, methods.evt_n_boot, methods.evt_seed, progress)
     par = None
     if parametric:
         from overbound.methods.parametric import parametric_analysis
@@ -287,9 +266,7 @@ def _with_methods(
         if progress:
             progress("parametric analysis")
         par = _guarded(failures, "parametric", "both", parametric_analysis, table, services=levels)
-    return Analysis(
-        table, reports, levels, counting, label, cl, done, failed, par, evidence, tuple(failures), network
-    )
+    return Analysis(table, reports, levels, counting, label, cl, done, failed, par, evidence, tuple(failures))
 
 
 def _is_campaign(inputs, format: str | None) -> bool:
@@ -313,17 +290,14 @@ def _analyze_campaign(
     client,
     cache: bool,
     counting_only: bool,
-    memory_limit: int | None,
     progress: Callable[[str], None] | None,
 ) -> Analysis:
-    """:func:`analyze` of a campaign dataset (see there)."""
+    """:func:`analyze` of a campaign dataset (see there): every method by partition."""
 
     def tick(stage: str, done: int, total: int) -> None:
         if progress:
             progress(f"counting KPIs, {stage}: {done}/{total} station-days")
 
-    if not counting_only and methods.needs_table:
-        _check_methods_memory(dataset, time_range, memory_limit)
     network = count_campaign(
         dataset,
         levels,
@@ -334,44 +308,51 @@ def _analyze_campaign(
         progress=tick,
     )
     report = _campaign_report(dataset, network)
-    label = title or dataset.name
-    evt_done = confidence_done = None
+    evt_done, cl, failures, par = ((), ()), (), [], None
     if not counting_only:  # the methods by partition read the partitions the counting read
         failed_keys = {f.key for f in network.failures}
         parts = [p for p in partitions_in(dataset, time_range) if p.key not in failed_keys]
-        confidence_done = _campaign_confidence(parts, methods, columns, client, time_range, progress)
+        cl, failures = _campaign_confidence(parts, methods, columns, client, time_range, progress)
         evt_done = _campaign_evt(parts, levels, methods, client, time_range, progress)
+        par = _campaign_parametric(parts, levels, methods, client, time_range, progress, failures)
     _release(client)
-    if counting_only or not methods.needs_table:  # nothing reads the pooled table
-        done, failed = evt_done or ((), ())
-        cl, cl_failed = confidence_done or ((), [])
-        return Analysis(
-            pl.DataFrame(),
-            (report,),
-            levels,
-            network.counting,
-            label,
-            confidence=cl,
-            evt=done,
-            evt_failures=failed,
-            evidence=network.evidence,
-            method_failures=tuple(cl_failed),
-            network=network,
-        )
-    table, _ = read_dataset(dataset, columns=columns, skip={f.key for f in network.failures})
-    table = validate_epochs(table if time_range is None else filter_time(table, time_range), str(dataset))
-    return _with_methods(
-        table,
+    return Analysis(
+        pl.DataFrame(),
         (report,),
         levels,
         network.counting,
-        label,
-        methods,
-        progress,
-        network,
-        network.evidence,
-        evt_done,
-        confidence_done,
+        title or dataset.name,
+        confidence=cl,
+        evt=evt_done[0],
+        evt_failures=evt_done[1],
+        parametric=par,
+        evidence=network.evidence,
+        method_failures=tuple(failures),
+        network=network,
+    )
+
+
+def _campaign_parametric(parts, levels, methods: _Methods, client, time_range, progress, failures: list):
+    """The parametric analysis of the partitions the counting read (the passes of
+    :mod:`overbound.campaign_parametric`), when asked: as of the pooled table."""
+    if not methods.parametric:
+        return None
+    from overbound.campaign_parametric import campaign_parametric
+
+    def tick(stage: str, done: int, total: int) -> None:
+        if progress:
+            progress(f"{stage}: {done}/{total}")
+
+    return _guarded(
+        failures,
+        "parametric",
+        "both",
+        campaign_parametric,
+        parts,
+        services=levels,
+        client=client,
+        time_range=time_range,
+        progress=tick,
     )
 
 
@@ -462,31 +443,6 @@ def _release(client) -> None:
     their passes kept for reuse, which would otherwise add to the campaign's peak."""
     if client is not None:
         client.run(release_freed_memory)
-
-
-#: Memory the default methods take per epoch of the pooled table they read (measured: 7.5 GB at the
-#: peak of the default analysis of one station-year at 1 Hz, 31.5 M epochs).
-METHODS_BYTES_PER_EPOCH = 240
-
-
-def _check_methods_memory(dataset: Path, time_range, limit: int | None) -> None:
-    """Refuse, before any work, a dataset whose pooled table the methods could not hold in
-    ``limit`` bytes (default: the memory available now); the counting and the verdicts' evidence
-    need no such table."""
-    import psutil
-
-    paths = [p.path for p in partitions_in(dataset, time_range)]
-    n = pl.scan_parquet(paths).select(pl.len()).collect().item() if paths else 0
-    need = n * METHODS_BYTES_PER_EPOCH
-    limit = psutil.virtual_memory().available if limit is None else limit
-    if need > limit:
-        raise InputError(
-            str(dataset),
-            f"the parametric analysis still reads the pooled table: {n:,} epochs, about "
-            f"{need / 1e9:.1f} GB, more than the {limit / 1e9:.1f} GB available; run with --no-parametric "
-            "(the KPIs, the verdicts, the PL confidence level and the EVT tail extrapolation, by "
-            "partition) or on a shorter span (--start/--end)",
-        )
 
 
 def _campaign_report(dataset: Path, network: CampaignCounting) -> ReadReport:

@@ -276,8 +276,11 @@ def analyze(
     campaign = len(inputs) == 1 and is_dataset(inputs[0])
     if (counting_only or workers is not None or scheduler) and not campaign:
         raise click.UsageError("--counting-only, --workers and --scheduler apply to a campaign dataset")
-    if counting_only and epochs_out:
-        raise click.UsageError("--epochs writes the pooled table, which --counting-only does not read")
+    if campaign and epochs_out:
+        raise click.UsageError(
+            "--epochs writes the pooled epoch table, which a dataset's analysis does not read "
+            "(its partitions are the epoch table)"
+        )
     with contextlib.ExitStack() as outputs:  # both checked (and locked) before the analysis
         stage = outputs.enter_context(_staged(out_dir, "analyze"))
         epochs_path = _epochs_path(epochs_out, stage, outputs) if epochs_out else None

@@ -244,3 +244,47 @@ def test_loglinear_fit_recovers_exact_line():
     assert f.risk(50.0) == pytest.approx(10.0 ** (-2.133 - 0.6), rel=1e-12)
     assert fit_loglinear(al[:3], np.array([1e-3, 0.0, 1e-4])) is None
     assert fit_loglinear(np.full(4, 20.0), np.full(4, 1e-3)) is None
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_window_counter_fed_in_runs_equals_one_station(seed):
+    """The counts of a station fed a run of slots at a time (station-days: gaps between them, a
+    slot shared by two runs, runs shorter than a window) equal noncontinuity_curve of all its epochs."""
+    from overbound.stats.continuity import WindowCounter, availability_ranks
+
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(200, 3000))
+    t = np.cumsum(rng.choice([1, 1, 1, 1, 2, 7], size=n)).astype(np.int64) * 1_000_000
+    t[rng.random(n) < 0.02] += 200_000  # jitter: some epochs off their slot, a few share one
+    t = np.sort(t)
+    pl = rng.gamma(4.0, 5.0, size=n)
+    pl[rng.random(n) < 0.03] = np.nan
+    alert = rng.random(n) < 0.01
+    al = np.linspace(5.0, 40.0, 37)
+    for window_s in (3.0, 15.0):
+        whole = noncontinuity_curve(t, pl, al, window_s=window_s, unavailable=alert)
+        g = station_grid(t)._grid
+        w = max(1, round(window_s / g.interval_s))
+        counter = WindowCounter(al.size, w)
+        ranks = availability_ranks(al, pl, alert)
+        cuts = np.sort(rng.choice(np.arange(1, n), size=int(rng.integers(1, 12)), replace=False))
+        runs = np.split(np.arange(n), cuts)
+        for i, run in enumerate(runs):
+            k = g.index[run]
+            dense = np.full(int(k[-1] - k[0]) + 1, al.size, dtype=counter.dtype)
+            dense[k - k[0]] = ranks[run]
+            counter.feed(int(k[0]), dense, last=i == len(runs) - 1)
+        got = counter.counts()
+        assert np.array_equal(got[0], whole.n_windows)
+        assert np.array_equal(got[1], whole.n_fail)
+        assert np.array_equal(got[2], whole.n_events)
+        assert whole.n_fail.sum() > 0
+
+
+def test_window_counter_refuses_slots_out_of_order():
+    from overbound.stats.continuity import WindowCounter
+
+    c = WindowCounter(4, 3)
+    c.feed(10, np.zeros(8, dtype=np.int16))
+    with pytest.raises(ValueError, match="in order"):
+        c.feed(12, np.zeros(2, dtype=np.int16))

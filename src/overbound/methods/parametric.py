@@ -26,6 +26,20 @@ import polars as pl
 
 from overbound.io.schema import InputError, as_numpy
 from overbound.methods.counting import _station_slices  # the counting's station split, shared on purpose
+from overbound.methods.parametric_partitions import (
+    ACF_MAX_SLOTS,
+    AxisPlan,
+    FittedBlock,
+    SecondInputs,
+    add_in_order,
+    axis_plan,
+    block_first,
+    block_information,
+    block_profile,
+    block_second,
+    fitted_block,
+    second_inputs,
+)
 from overbound.methods.pooling import PE_PL, pool_epochs
 from overbound.services import ServiceLevel, parse_service, resolve_services
 from overbound.stats.continuity import (
@@ -38,24 +52,25 @@ from overbound.stats.continuity import (
     pool_curves,
     station_grid,
 )
-from overbound.stats.dependence import RegularSeries, autocorrelation, one_over_e_time, regular_series
+from overbound.stats.dependence import autocorrelation, one_over_e_time
 from overbound.stats.parametric import (
     RatioFit,
     WeibullFit,
     effective_sample_size,
-    fit_normal_ratio,
-    fit_rayleigh_ratio,
-    fit_weibull,
     integrity_probabilities,
     log_ratio_exceedance,
+    normal_ratio_fit,
     ratio_bound,
+    rayleigh_ratio_fit,
     weibull_bound,
-    weibull_covariance,
+    weibull_covariance_from_sums,
+    weibull_fit_from_sums,
     weibull_logsf,
 )
 
 __all__ = [
     "ACF_MAX_LAG_S",
+    "ACF_MAX_SLOTS",
     "AXIS_EXTRA_KEYS",
     "AXIS_KEYS",
     "CONTINUITY_HALF_WIDTH_M",
@@ -80,8 +95,6 @@ AXES = ("vertical", "horizontal")
 MIN_EPOCHS = 10
 #: Largest ACF lag examined (s): 6 h, or the series when shorter.
 ACF_MAX_LAG_S = 6 * 3600.0
-#: Longer regular series have their ACF computed on every q-th slot (see :func:`parametric_analysis`).
-ACF_MAX_SLOTS = 1 << 21
 #: ACF points kept on the result for the figure (evenly thinned, the 1/e crossings kept).
 ACF_FIGURE_POINTS = 2000
 #: Half width of the alert-limit window of the local continuity fit (m).
@@ -375,22 +388,14 @@ class _ACF:
     decorrelation_s: float
 
 
-def _on_grid(reg: RegularSeries, x: np.ndarray) -> np.ndarray:
-    """Another series of the same epochs on the grid of ``reg`` (merged slots keep the larger value)."""
-    out = np.full(reg.values.size, np.nan)
-    if reg.n_merged:
-        np.fmax.at(out, reg.slot, x)
-    else:
-        out[reg.slot] = x
-    return out
-
-
-def _acf(values: np.ndarray, interval_s: float) -> _ACF:
-    r"""ACF of a regular series (NaN in gaps) and its 1/e decorrelation time.
+def _acf(sub: np.ndarray, step: int, interval_s: float) -> _ACF:
+    r"""ACF of a regular series (NaN in gaps) read at every ``step``-th slot (``sub``), and its 1/e
+    decorrelation time.
 
     Lags up to :data:`ACF_MAX_LAG_S`. A grid longer than :data:`ACF_MAX_SLOTS` slots is read every
-    :math:`q = \lceil n / \text{ACF\_MAX\_SLOTS}\rceil`-th slot: the estimator at lag :math:`kq`
-    uses the pairs of those slots only (unbiased, a little noisier), and the decorrelation time is
+    :math:`q = \lceil n / \text{ACF\_MAX\_SLOTS}\rceil`-th slot (the ``step`` of
+    :class:`~overbound.methods.parametric_partitions.AxisPlan`): the estimator at lag :math:`kq` uses
+    the pairs of those slots only (unbiased, a little noisier), and the decorrelation time is
     resolved to :math:`q` intervals, rounded up (longer: fewer effective samples, conservative).
 
     The sample ACF of a series whose mean is estimated is biased low: for a Gauss-Markov series of
@@ -402,8 +407,6 @@ def _acf(values: np.ndarray, interval_s: float) -> _ACF:
     :math:`\tau` = 300-600 s the uncorrected 1/e time was 10-15 % short and the bounds below their
     nominal share (validation/parametric_coverage.py); on months of data :math:`\epsilon < 10^{-3}`.
     """
-    step = max(1, -(-values.size // ACF_MAX_SLOTS))
-    sub = values[::step] if step > 1 else values
     max_lag = int(min(round(ACF_MAX_LAG_S / (interval_s * step)), sub.size - 1))
     rho = autocorrelation(sub, max_lag=max(max_lag, 0))
     if not np.isfinite(rho[0]):
@@ -495,6 +498,115 @@ def _log10(ln: float) -> float:
     return ln / _LN10
 
 
+@dataclass(frozen=True, slots=True)
+class RowCounts:
+    """What one axis' analysis counts over all rows of the table (no solution and alerts
+    unavailable): the rows, those available at each service's alert limit, and the
+    non-continuity curve of each window (stations pooled)."""
+
+    n_rows: int
+    n_available: dict[float, int]
+    curves: dict[float, ContinuityCurve]
+
+
+def service_alert_limits(services: tuple[ServiceLevel, ...], axis: str) -> np.ndarray:
+    """The services' alert limits on ``axis`` (sorted, distinct)."""
+    return np.unique([al for s in services if (al := s.alert_limit(axis)) is not None]).astype(np.float64)
+
+
+def continuity_grids(services: tuple[ServiceLevel, ...], axis: str, pl_range: tuple[float, float]) -> dict:
+    """Per window used by a service on ``axis``, the alert limits of its curve: 400 over the fitted
+    PL range (:func:`~overbound.stats.continuity.alert_limit_grid`) and those services' limits."""
+    base = alert_limit_grid(np.array(pl_range))
+    windows = sorted({s.continuity_window_s for s in services if s.alert_limit(axis) is not None})
+    return {
+        w: np.union1d(
+            base,
+            [a for s in services if s.continuity_window_s == w and (a := s.alert_limit(axis)) is not None],
+        )
+        for w in windows
+    }
+
+
+def _row_counts(rows: _Rows, table: pl.DataFrame, axis: str, services, pl_range, confidence) -> RowCounts:
+    pl_col = as_numpy(table[PE_PL[axis][1]]).astype(np.float64, copy=False)
+    if rows.alert is not None:
+        pl_col = np.where(rows.alert & ~np.isnan(pl_col), np.inf, pl_col)  # counting's convention
+    curves = {
+        w: _continuity(rows, pl_col, grid, w, confidence)
+        for w, grid in continuity_grids(services, axis, pl_range).items()
+    }
+    n_available = {
+        float(al): int(np.count_nonzero(pl_col < al)) for al in service_alert_limits(services, axis)
+    }
+    return RowCounts(pl_col.size, n_available, curves)
+
+
+def _pooled_blocks(d) -> tuple[list[FittedBlock], list[int]]:
+    """The pooled epochs cut into blocks (station-days) and each block's station code."""
+    cuts = np.flatnonzero(np.diff(d.day)) + 1
+    bounds = zip(np.concatenate([[0], cuts]), np.concatenate([cuts, [d.day.size]]), strict=True)
+    blocks, stations = [], []
+    for a, b in bounds:
+        blocks.append(fitted_block(d.t_us[a:b], d.pe[a:b], d.pl[a:b], d.alert[a:b]))
+        stations.append(int(d.station[a]))
+    return blocks, stations
+
+
+def check_fittable(plan: AxisPlan, axis: str) -> None:
+    """Raise ValueError with the reason when the axis cannot be fitted (the checks, in order, of
+    the ratio and Weibull fits on the pooled epochs)."""
+    if plan.n < MIN_EPOCHS:
+        raise ValueError(f"{plan.n} epochs with a solution and no alert (at least {MIN_EPOCHS} needed)")
+    if axis == "vertical" and not plan.varies:
+        raise ValueError("r is constant: a normal fit needs a positive standard deviation")
+    if axis == "horizontal" and not plan.ratio_squares > 0.0:
+        raise ValueError("r is all zero: a Rayleigh fit needs a positive scale")
+    if not plan.log_varies:
+        raise ValueError("x is constant: the Weibull ML shape is infinite")
+
+
+def ratio_fit_of(plan: AxisPlan, second: SecondInputs, axis: str) -> RatioFit:
+    """The ratio fit of ``axis`` from the merged passes (:func:`check_fittable` passed)."""
+    if axis == "vertical":
+        return normal_ratio_fit(plan.n, plan.mean, second.squared_deviations, plan.varies)
+    return rayleigh_ratio_fit(plan.n, plan.ratio_squares)
+
+
+@dataclass(frozen=True, slots=True)
+class Dependence:
+    """The ACFs of the ratio series and of the PL, their decorrelation times and the effective
+    sample sizes of the ratio's and of the Weibull's bounds (step 3 of :func:`parametric_analysis`)."""
+
+    ratio_acf: _ACF
+    pl_acf: _ACF
+    tau_ratio: float
+    tau_pl: float
+    n_effective: float
+    pl_n_effective: float
+    auto: bool
+
+
+def dependence(plan: AxisPlan, second: SecondInputs, axis: str, decorrelation: str | float) -> Dependence:
+    """Step 3 of :func:`parametric_analysis` from the merged passes."""
+    interval_s = plan.dt / 1e6
+    r_acf = _acf(second.ratio_sub, plan.step, interval_s)
+    p_acf = _acf(second.pl_sub, plan.step, interval_s)
+    auto = decorrelation == "auto"
+    tau_r = r_acf.decorrelation_s if auto else float(decorrelation)
+    tau_p = p_acf.decorrelation_s if auto else float(decorrelation)
+    # the statistics' integral time scales: 2 tau for means of the PL (Weibull scores) and of r^2 for the
+    # Rayleigh (whose own 1/e time is half its components'), tau for the normal's variance (step 3)
+    n_eff = _n_effective(plan.n, interval_s, tau_r) / (2.0 if axis == "horizontal" else 1.0)
+    pl_n_eff = _n_effective(plan.n, interval_s, tau_p) / 2.0
+    return Dependence(r_acf, p_acf, tau_r, tau_p, n_eff, pl_n_eff, auto)
+
+
+def needs_information(dep: Dependence) -> bool:
+    """Whether the Weibull bound is computed (its covariance needs the information sums)."""
+    return dep.pl_n_effective > 2  # the bound's t quantile has n_e - 2 degrees of freedom
+
+
 def _axis(
     table: pl.DataFrame,
     rows: _Rows,
@@ -503,69 +615,69 @@ def _axis(
     decorrelation: str | float,
     confidence: float,
 ) -> AxisParametric:
-    """Raises InputError/ValueError with the reason when the axis cannot be analysed."""
+    """Raises InputError/ValueError with the reason when the axis cannot be analysed. The pooled
+    epochs in blocks (station-days) through the passes of :mod:`overbound.methods.parametric_partitions`."""
     d = pool_epochs(table, axis, signed=axis == "vertical")
-    keep = ~d.alert
-    n = int(np.count_nonzero(keep))
-    if n < MIN_EPOCHS:
-        raise ValueError(f"{n} epochs with a solution and no alert (at least {MIN_EPOCHS} needed)")
-    t_us = d.t_us[keep]
-    pls = d.pl[keep]
-    ratio = d.pe[keep] / pls
-    ratio_fit = fit_normal_ratio(ratio) if axis == "vertical" else fit_rayleigh_ratio(ratio)
-    weibull = fit_weibull(pls)
-    interval_s = d.interval_us / 1e6
-    # the Rayleigh sigma^2 is a mean of r^2: its dependence is that of r^2 (step 3)
-    acf_series = ratio if axis == "vertical" else ratio * ratio
-    reg = regular_series(t_us, acf_series, interval_s=interval_s)  # both series share the slots
-    r_acf = _acf(reg.values, interval_s)
-    p_acf = _acf(_on_grid(reg, pls), interval_s)
-    del reg
-    auto = decorrelation == "auto"
-    tau_r = r_acf.decorrelation_s if auto else float(decorrelation)
-    tau_p = p_acf.decorrelation_s if auto else float(decorrelation)
-    # the statistics' integral time scales: 2 tau for means of the PL (Weibull scores) and of r^2 for the
-    # Rayleigh (whose own 1/e time is half its components'), tau for the normal's variance (step 3)
-    n_eff = _n_effective(n, interval_s, tau_r) / (2.0 if axis == "horizontal" else 1.0)
-    pl_n_eff = _n_effective(n, interval_s, tau_p) / 2.0
+    blocks, stations = _pooled_blocks(d)
+    als = service_alert_limits(services, axis)
+    plan = axis_plan([block_first(b, st, als) for b, st in zip(blocks, stations, strict=True)])
+    check_fittable(plan, axis)
+    second = second_inputs([block_second(b, plan, i, axis) for i, b in enumerate(blocks)], plan)
+    weibull = weibull_fit_from_sums(
+        plan.n,
+        plan.ymax,
+        plan.spread,
+        second.start,
+        lambda b: add_in_order(block_profile(bl, plan.ymax, b) for bl in blocks),
+    )
+    dep = dependence(plan, second, axis, decorrelation)
+    info = add_in_order(block_information(bl, weibull) for bl in blocks) if needs_information(dep) else None
+    counts = _row_counts(rows, table, axis, services, plan.pl_range, confidence)
+    return axis_result(axis, plan, second, weibull, dep, info, counts, services, confidence)
+
+
+def axis_result(
+    axis: str,
+    plan: AxisPlan,
+    second: SecondInputs,
+    weibull: WeibullFit,
+    dep: Dependence,
+    information: np.ndarray | None,
+    counts: RowCounts,
+    services: tuple[ServiceLevel, ...],
+    confidence: float,
+) -> AxisParametric:
+    """Steps 4-8 of :func:`parametric_analysis` from the merged passes of an axis (the pooled
+    table's or a campaign's)."""
+    interval_s = plan.dt / 1e6
+    ratio_fit = ratio_fit_of(plan, second, axis)
     notes: list[str] = []
-    bound_fit = ratio_bound(ratio_fit, n_eff, confidence) if n_eff >= 0 else None
+    bound_fit = ratio_bound(ratio_fit, dep.n_effective, confidence) if dep.n_effective >= 0 else None
     if bound_fit is None:
-        notes.append(_short_note("ratio", n_eff, tau_r))
+        notes.append(_short_note("ratio", dep.n_effective, dep.tau_ratio))
     cov = None
-    if pl_n_eff > 2:  # the bound's t quantile has n_e - 2 degrees of freedom
-        cov = weibull_covariance(weibull, pls, pl_n_eff)
+    if information is not None:
+        cov = weibull_covariance_from_sums(weibull, information, plan.n, dep.pl_n_effective)
     else:
-        notes.append(_short_note("PL", pl_n_eff, tau_p))
+        notes.append(_short_note("PL", dep.pl_n_effective, dep.tau_pl))
     ln_q1 = float(log_ratio_exceedance(ratio_fit, 1.0))
     ln_q1_b = None if bound_fit is None else float(log_ratio_exceedance(bound_fit, 1.0))
-    lags, racf, pacf = _thin_acf(r_acf, p_acf)
-
-    pl_col = as_numpy(table[PE_PL[axis][1]]).astype(np.float64, copy=False)
-    if rows.alert is not None:
-        pl_col = np.where(rows.alert & ~np.isnan(pl_col), np.inf, pl_col)  # counting's convention
-    pl_range = (float(pls.min()), float(pls.max()))
-    base_grid = alert_limit_grid(pls)
-    windows = sorted({s.continuity_window_s for s in services if s.alert_limit(axis) is not None})
-    curves, fits, fits_b = {}, {}, {}
-    for w in windows:
-        als = [s.alert_limit(axis) for s in services if s.continuity_window_s == w]
-        curves[w] = _continuity(
-            rows, pl_col, np.union1d(base_grid, [a for a in als if a is not None]), w, confidence
-        )
-        fits[w], fits_b[w] = _fits(curves[w], _in_range(curves[w], *pl_range))
-
+    lags, racf, pacf = _thin_acf(dep.ratio_acf, dep.pl_acf)
+    curves = counts.curves
+    fits, fits_b = {}, {}
+    for w, curve in curves.items():
+        fits[w], fits_b[w] = _fits(curve, _in_range(curve, *plan.pl_range))
+    als = service_alert_limits(services, axis)
     ctx = _AxisContext(
-        pls,
-        pl_col,
+        plan,
+        {float(a): int(c) for a, c in zip(als, plan.at_or_above, strict=True)},
+        counts,
         ratio_fit,
         bound_fit,
         weibull,
         cov,
-        pl_n_eff,
+        dep.pl_n_effective,
         confidence,
-        pl_range,
-        curves,
         fits,
         fits_b,
         interval_s,
@@ -573,19 +685,19 @@ def _axis(
     out_services = {s.name: _service(ctx, s, axis) for s in services}
     return AxisParametric(
         axis=axis,
-        n_epochs=n,
-        n_alert=int(np.count_nonzero(d.alert)),
-        n_no_solution=d.n_no_solution,
-        n_rows=d.n_rows,
-        n_stations=d.n_stations,
+        n_epochs=plan.n,
+        n_alert=plan.n_alert,
+        n_no_solution=counts.n_rows - plan.n_solution,
+        n_rows=counts.n_rows,
+        n_stations=plan.n_stations,
         interval_s=interval_s,
         ratio_fit=ratio_fit,
         ratio_bound_fit=bound_fit,
-        decorrelation_s=tau_r,
-        pl_decorrelation_s=tau_p,
-        decorrelation_auto=auto,
-        n_effective=n_eff,
-        pl_n_effective=pl_n_eff,
+        decorrelation_s=dep.tau_ratio,
+        pl_decorrelation_s=dep.tau_pl,
+        decorrelation_auto=dep.auto,
+        n_effective=dep.n_effective,
+        pl_n_effective=dep.pl_n_effective,
         p_mi=math.exp(ln_q1),
         log10_p_mi=_log10(ln_q1),
         p_mi_bound=None if ln_q1_b is None else math.exp(ln_q1_b),
@@ -595,8 +707,8 @@ def _axis(
         acf_lags_s=lags,
         ratio_acf=racf,
         pl_acf=pacf,
-        acf_step=r_acf.step,
-        pl_range=pl_range,
+        acf_step=plan.step,
+        pl_range=plan.pl_range,
         continuity_curves=curves,
         continuity_fits=fits,
         continuity_fits_bound=fits_b,
@@ -621,16 +733,15 @@ def _short_note(series: str, n_eff: float, tau: float) -> str:
 
 @dataclass(frozen=True, slots=True)
 class _AxisContext:
-    pls: np.ndarray  # fitted PLs
-    pl_col: np.ndarray  # all rows' PL, alerts as +inf (the counting's input)
+    plan: AxisPlan
+    n_unavailable_fitted: dict[float, int]  # fitted PLs at or above each service AL
+    counts: RowCounts
     ratio_fit: RatioFit
     bound_fit: RatioFit | None
     weibull: WeibullFit
     cov: np.ndarray | None
     pl_n_effective: float
     confidence: float
-    pl_range: tuple[float, float]
-    curves: dict[float, ContinuityCurve]
     fits: dict[float, LogLinearFit | None]
     fits_b: dict[float, LogLinearFit | None]
     interval_s: float
@@ -655,14 +766,14 @@ def _service(ctx: _AxisContext, s: ServiceLevel, axis: str) -> ServiceParametric
     bound = None if wb is None or ctx.bound_fit is None else integrity_probabilities(ctx.bound_fit, wb, al)
     ln_s = float(weibull_logsf(ctx.weibull, al))
     ln_sb = None if wb is None else float(weibull_logsf(wb, al))
-    n_rows = ctx.pl_col.size
-    n_avail = int(np.count_nonzero(ctx.pl_col < al))
+    n_rows = ctx.counts.n_rows
+    n_avail = ctx.counts.n_available[float(al)]
     w = s.continuity_window_s
-    curve = ctx.curves[w]
+    curve = ctx.counts.curves[w]
     j = int(np.searchsorted(curve.alert_limit, al))  # al is on the grid
     risk = float(curve.risk[j])
     local = _in_range(curve, al - CONTINUITY_HALF_WIDTH_M, al + CONTINUITY_HALF_WIDTH_M)
-    local &= _in_range(curve, *ctx.pl_range)
+    local &= _in_range(curve, *ctx.plan.pl_range)
     lfit, lfit_b = _fits(curve, local)
     source, fit, fit_b = (
         ("local", lfit, lfit_b) if lfit is not None else ("global", ctx.fits[w], ctx.fits_b[w])
@@ -689,7 +800,7 @@ def _service(ctx: _AxisContext, s: ServiceLevel, axis: str) -> ServiceParametric
         log10_unavailability_bound=None if ln_sb is None else _log10(ln_sb),
         unavailability_counted=1.0 - n_avail / n_rows if n_rows else None,
         n_available_counted=n_avail,
-        unavailability_counted_fitted=float(np.count_nonzero(ctx.pls >= al)) / ctx.pls.size,
+        unavailability_counted_fitted=ctx.n_unavailable_fitted[float(al)] / ctx.plan.n,
         weibull_bound=wb,
         p_hmi=nominal.p_hmi,
         log10_p_hmi=nominal.log10_p_hmi,
@@ -759,6 +870,11 @@ def parametric_analysis(
     1. **Epochs.** Per axis, the solution epochs (finite PE, PL > 0) of all stations pooled by
        :func:`~overbound.methods.pooling.pool_epochs` (stations a day apart on one time axis);
        epochs flagged ``alert`` are left out of the fits (a receiver alert is not a PL sample).
+       The pooled series is cut into blocks, one per station and GPS day, and every fit is
+       finished from the blocks' sums added in pooled order
+       (:mod:`~overbound.methods.parametric_partitions`): the path of a campaign dataset
+       (:mod:`overbound.campaign_parametric`), which gives the same results to the last bit.
+       Choice: against the same sums over one whole array the fits differ in their last digits.
     2. **Ratio** (2.1.1, 2.2.1): :math:`r = VPE/VPL` with the signed VPE, normal fit (mean, sample
        standard deviation); :math:`r = HPE/HPL`, Rayleigh ML fit. :math:`P_{MI} = P(|r| > 1)`.
     3. **Decorrelation.** ACF of the ratio and of the PL on the pooled regular grid (NaN in gaps,

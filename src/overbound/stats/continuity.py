@@ -26,8 +26,11 @@ __all__ = [
     "ContinuityCurve",
     "LogLinearFit",
     "StationGrid",
+    "WindowCounter",
     "alert_limit_grid",
+    "availability_ranks",
     "clopper_pearson_upper",
+    "curve_from_counts",
     "fit_loglinear",
     "noncontinuity_curve",
     "pool_curves",
@@ -206,6 +209,15 @@ def _rank(al: np.ndarray, x: np.ndarray) -> np.ndarray:
     return out
 
 
+def availability_ranks(alert_limits: np.ndarray, pl: np.ndarray, unavailable: np.ndarray | None = None):
+    """Per epoch, the first index of ``alert_limits`` at which it is available (``AL > PL``):
+    ``len(alert_limits)`` for a PL that is NaN, unavailable or above the grid; what
+    :class:`WindowCounter` is fed."""
+    al = _check_alert_limits(alert_limits)
+    x = np.asarray(pl, dtype=np.float64)
+    return _rank(al, _check_pl(x, x.size, unavailable))
+
+
 def _sliding_max(x: np.ndarray, w: int) -> np.ndarray:
     """``out[i] = max(x[i:i+w])`` for ``i = 0 .. len(x) - w``, by doubling (log2 w passes).
 
@@ -221,41 +233,100 @@ def _sliding_max(x: np.ndarray, w: int) -> np.ndarray:
     return m
 
 
-def _count_windows(rank: np.ndarray, peak: np.ndarray, n_al: int) -> tuple[np.ndarray, ...]:
-    """Windows, failing windows and loss events per alert-limit index (see :func:`noncontinuity_curve`).
+class WindowCounter:
+    """The window, failure and event counts of :func:`noncontinuity_curve` of one station, its grid
+    slots fed in order, a run at a time (a campaign's station-days; see :meth:`feed`).
 
-    ``rank[k]``: first AL index at which slot ``k`` is available; ``peak[k]``: first AL index at
-    or above which a slot of ``(k, k+w]`` is unavailable, for the ``K = peak.size`` start slots.
-    The window at ``k`` counts for ``j >= lo = rank[k]`` and fails for ``lo <= j < hi`` with
-    ``hi = max(lo, peak[k])``; it starts an event for ``j`` in ``[max(lo, hi'), hi)``, ``hi'`` of
-    slot ``k - 1`` (slot ``k - 1`` available and its window not failing), and at the first
-    available slot. Intervals are added with difference arrays (``+1`` at the start, ``-1`` at
-    the end), by chunks.
+    ``rank[k]``: first AL index at which slot ``k`` is available (``n_al``: never). The window at
+    ``k`` counts for ``j >= lo = rank[k]`` and fails for ``lo <= j < hi`` with ``hi = max(lo,
+    peak[k])``, ``peak[k]`` the largest rank of slots ``k+1 .. k+w``; it starts an event for ``j`` in
+    ``[max(lo, hi'), hi)``, ``hi'`` of slot ``k - 1`` (slot ``k - 1`` available and its window not
+    failing), and at the first available slot. Intervals are added with difference arrays (``+1`` at
+    the start, ``-1`` at the end), by chunks. Integer counts: the same whatever the runs fed.
     """
-    d_win = np.zeros(n_al + 1, dtype=np.int64)
-    d_fail = np.zeros(n_al + 1, dtype=np.int64)
-    d_event = np.zeros(n_al + 1, dtype=np.int64)
-    k_starts = peak.size
-    for s in range(0, k_starts, _CHUNK):
-        e = min(s + _CHUNK, k_starts)
-        p = max(s - 1, 0)  # one slot before the chunk for the previous window
-        lo = rank[p:e]
-        hi = np.maximum(lo, peak[p:e])
-        c_lo = np.bincount(lo[s - p :], minlength=n_al + 1)
-        d_win += c_lo
-        d_fail += c_lo
-        d_fail -= np.bincount(hi[s - p :], minlength=n_al + 1)
-        ev_lo = np.maximum(lo[1:], hi[:-1])
-        d_event += np.bincount(ev_lo, minlength=n_al + 1)
-        d_event -= np.bincount(np.maximum(ev_lo, hi[1:]), minlength=n_al + 1)
-    n_windows, n_fail, n_events = (np.cumsum(d)[:n_al] for d in (d_win, d_fail, d_event))
-    # the first available start slot f(j) (non-increasing in j) starts an event when it fails
-    first_rank = np.minimum.accumulate(rank[:k_starts])
-    j = np.arange(n_al)
-    f = np.searchsorted(-first_rank, -j, side="left")  # first k with first_rank[k] <= j
-    has = f < k_starts
-    n_events[has] += j[has] < np.maximum(rank[f[has]], peak[f[has]])
-    return n_windows, n_fail, n_events
+
+    def __init__(self, n_al: int, w: int) -> None:
+        self.n_al, self.w = int(n_al), int(w)
+        self._dtype = np.int16 if n_al < np.iinfo(np.int16).max else np.int32
+        self._pending = np.empty(0, dtype=self._dtype)  # slots not yet a counted window start
+        self._next = 0  # grid index of _pending[0]
+        self._prev: tuple[int, int] | None = None  # (lo, hi) of the last start counted
+        self._min = self.n_al  # lowest rank of the starts counted
+        self._diff = np.zeros((3, self.n_al + 1), dtype=np.int64)
+        self._first = np.zeros(self.n_al, dtype=np.int64)
+
+    @property
+    def dtype(self) -> np.dtype:
+        """The integer type of the ranks."""
+        return np.dtype(self._dtype)
+
+    def feed(self, first_slot: int, ranks: np.ndarray, *, last: bool = False) -> None:
+        """The ranks of the consecutive slots from ``first_slot`` on. Slots skipped since the last
+        feed are missing (never available); a first slot equal to the last slot fed replaces it
+        (the later epoch sets a shared slot, as numpy's fancy assignment of one table does).
+        ``last``: no slot follows, the last windows are counted."""
+        end = self._next + self._pending.size
+        if self._pending.size and first_slot < end - 1:
+            raise ValueError(f"slot {first_slot} fed after slot {end - 1}: slots must be fed in order")
+        r = np.asarray(ranks, dtype=self._dtype)
+        if not self._pending.size:
+            self._next = first_slot
+            buf = r
+        elif first_slot == end - 1:
+            buf = np.concatenate([self._pending[:-1], r])
+        else:
+            gap = np.full(first_slot - end, self.n_al, dtype=self._dtype)
+            buf = np.concatenate([self._pending, gap, r])
+        self._pending = buf
+        self._count(last)
+
+    def _count(self, last: bool) -> None:
+        """Count the starts whose window's slots are all final (the last slot fed is not, until
+        ``last``: the next run may replace it)."""
+        buf, w = self._pending, self.w
+        n_starts = buf.size - w - (0 if last else 1)
+        if n_starts <= 0:
+            return
+        peak = _sliding_max(buf[: n_starts + w], w)[1:]
+        for s in range(0, n_starts, _CHUNK):
+            e = min(s + _CHUNK, n_starts)
+            self._add(buf[s:e], peak[s:e])
+        self._pending = buf[n_starts:].copy()
+        self._next += n_starts
+
+    def _add(self, lo: np.ndarray, peak: np.ndarray) -> None:
+        n = self.n_al + 1
+        hi = np.maximum(lo, peak)
+        c_lo = np.bincount(lo, minlength=n)
+        self._diff[0] += c_lo
+        self._diff[1] += c_lo
+        self._diff[1] -= np.bincount(hi, minlength=n)
+        if self._prev is not None:  # the window before is the last one counted
+            lo_p = np.concatenate([[self._prev[0]], lo])
+            hi_p = np.concatenate([[self._prev[1]], hi])
+        else:
+            lo_p, hi_p = lo, hi
+        ev_lo = np.maximum(lo_p[1:], hi_p[:-1])
+        self._diff[2] += np.bincount(ev_lo, minlength=n)
+        self._diff[2] -= np.bincount(np.maximum(ev_lo, hi_p[1:]), minlength=n)
+        self._prev = (int(lo[-1]), int(hi[-1]))
+        # the first available start slot f(j) (non-increasing in j) starts an event when it fails
+        run = np.minimum.accumulate(lo)
+        low = int(run[-1])
+        if low < self._min:
+            j = np.arange(low, self._min)
+            f = np.searchsorted(-run, -j, side="left")  # first k of the chunk with run[k] <= j
+            self._first[j] += j < hi[f]
+            self._min = low
+
+    def finish(self) -> None:
+        """No slot follows: count the last windows."""
+        self._count(True)
+
+    def counts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(n_windows, n_fail, n_events)`` per AL index of the starts counted."""
+        n_windows, n_fail, n_events = (np.cumsum(d)[: self.n_al] for d in self._diff)
+        return n_windows, n_fail, n_events + self._first
 
 
 def clopper_pearson_upper(k: np.ndarray, n: np.ndarray, confidence: float) -> np.ndarray:
@@ -281,7 +352,7 @@ def _frozen(x: np.ndarray) -> np.ndarray:
     return x
 
 
-def _curve(
+def curve_from_counts(
     al: np.ndarray,
     n_windows: np.ndarray,
     n_fail: np.ndarray,
@@ -290,7 +361,9 @@ def _curve(
     window_s: float,
     confidence: float,
 ) -> ContinuityCurve:
-    """Risk, decorrelation factor and bound from the counts."""
+    """The :class:`ContinuityCurve` of the counts ``n_windows``, ``n_fail``, ``n_events`` at the alert
+    limits ``al`` (e.g. :meth:`WindowCounter.counts`), windows of ``w`` slots: the risk, the
+    decorrelation factor and the bound."""
     with np.errstate(invalid="ignore", divide="ignore"):
         risk = np.where(n_windows > 0, n_fail / n_windows, np.nan)
         factor = np.where(n_events > 0, n_fail / np.maximum(n_events, 1), float(w))
@@ -395,16 +468,18 @@ def noncontinuity_curve(
     zeros = np.zeros(n_al, dtype=np.int64)
     grid = sg._grid
     if grid is None or grid.interval_s > window_s:
-        return _curve(al, zeros, zeros.copy(), zeros.copy(), 1, window_s, confidence)
+        return curve_from_counts(al, zeros, zeros.copy(), zeros.copy(), 1, window_s, confidence)
     w = max(1, round(window_s / grid.interval_s))
     k_starts = grid.size - w
     if k_starts <= 0:
-        return _curve(al, zeros, zeros.copy(), zeros.copy(), w, window_s, confidence)
-    rank = np.full(grid.size, n_al, dtype=np.int16 if n_al < np.iinfo(np.int16).max else np.int32)
+        return curve_from_counts(al, zeros, zeros.copy(), zeros.copy(), w, window_s, confidence)
+    counter = WindowCounter(n_al, w)
+    rank = np.full(grid.size, n_al, dtype=counter.dtype)
     rank[grid.index] = _rank(al, v)  # AL_j > v  <=>  j >= rank; a missing slot is never available
-    peak = _sliding_max(rank, w)[1:]  # rank of M_k = max of the ranks (the rank is monotone in v)
-    n_windows, n_fail, n_events = _count_windows(rank, peak, n_al)
-    return _curve(al, n_windows, n_fail, n_events, w, window_s, confidence)
+    # the rank of M_k is the largest rank of its slots (the rank is monotone in v)
+    counter.feed(0, rank, last=True)
+    n_windows, n_fail, n_events = counter.counts()
+    return curve_from_counts(al, n_windows, n_fail, n_events, w, window_s, confidence)
 
 
 def station_grid(time_us: np.ndarray) -> StationGrid:
@@ -444,7 +519,7 @@ def pool_curves(curves: list[ContinuityCurve] | tuple[ContinuityCurve, ...]) -> 
             raise ValueError("cannot pool continuity curves with different windows or confidence levels")
     total = [sum(getattr(c, f) for c in curves) for f in ("n_windows", "n_fail", "n_events")]
     w = max(int(np.max(c.decorrelation_factor[c.n_events == 0], initial=1)) for c in curves)
-    return _curve(first.alert_limit, *total, w, first.window_s, first.confidence)
+    return curve_from_counts(first.alert_limit, *total, w, first.window_s, first.confidence)
 
 
 # --------------------------------------------------------------------------------------------------

@@ -26,7 +26,9 @@ The continuity curve of section 2.1.4 is in :mod:`overbound.stats.continuity`.
 
 from __future__ import annotations
 
+import functools
 import math
+from collections.abc import Callable, Generator
 from dataclasses import dataclass
 from typing import Literal
 
@@ -45,19 +47,28 @@ __all__ = [
     "fit_weibull",
     "integrity_probabilities",
     "log_ratio_exceedance",
+    "normal_ratio_fit",
     "pe_pl_density",
     "ratio_bound",
     "ratio_exceedance",
     "ratio_pdf",
     "ratio_plot_positions",
+    "rayleigh_ratio_fit",
+    "squared_deviations",
     "weibull_bound",
     "weibull_covariance",
+    "weibull_covariance_from_sums",
+    "weibull_fit_from_sums",
+    "weibull_fit_steps",
+    "weibull_information_sums",
     "weibull_logpdf",
     "weibull_logsf",
     "weibull_pdf",
     "weibull_pdf_band",
     "weibull_plot_positions",
+    "weibull_profile_sums",
     "weibull_sf",
+    "weibull_start_stride",
 ]
 
 _LN10 = math.log(10.0)
@@ -166,11 +177,32 @@ def fit_normal_ratio(r: np.ndarray) -> RatioFit:
         Not one-dimensional, fewer than two values, not finite, or constant.
     """
     a = _sample(r, "r", 2)
-    m = float(a.mean())
-    s = float(np.std(a, ddof=1))
-    if not float(a.max()) > float(a.min()):
+    m = float(a.sum()) / a.size
+    return normal_ratio_fit(a.size, m, squared_deviations(a, m), float(a.max()) > float(a.min()))
+
+
+def squared_deviations(r: np.ndarray, mean: float) -> float:
+    r""":math:`\sum_i (r_i - \bar r)^2`, as ``np.std`` sums them (a block's share of the normal fit)."""
+    d = r - mean
+    return float(np.multiply(d, d, out=d).sum())
+
+
+def normal_ratio_fit(n: int, mean: float, sum_squared_deviations: float, varies: bool) -> RatioFit:
+    r"""The normal fit of :func:`fit_normal_ratio` from its sums, which add over blocks of the ratios:
+    ``n`` ratios, their ``mean`` (their sum over ``n``), :math:`\sum (r_i - \bar r)^2` (see
+    :func:`squared_deviations`) and whether they are not all equal (``varies``); the standard
+    deviation is :math:`\sqrt{\sum (r_i - \bar r)^2 / (n - 1)}` (``ddof=1``).
+
+    Raises
+    ------
+    ValueError
+        Fewer than two ratios, or all equal.
+    """
+    if n < 2:
+        raise ValueError(f"r needs at least 2 values, got {n}")
+    if not varies:
         raise ValueError("r is constant: a normal fit needs a positive standard deviation")
-    return RatioFit("normal", m, s, int(a.size))
+    return RatioFit("normal", mean, math.sqrt(sum_squared_deviations / (n - 1)), int(n))
 
 
 def fit_rayleigh_ratio(r: np.ndarray) -> RatioFit:
@@ -195,10 +227,24 @@ def fit_rayleigh_ratio(r: np.ndarray) -> RatioFit:
     a = _sample(r, "r", 1)
     if (a < 0.0).any():
         raise ValueError("r must be >= 0 for a Rayleigh fit (HPE/HPL)")
-    s = math.sqrt(dot(a, a) / (2.0 * a.size))
+    return rayleigh_ratio_fit(a.size, dot(a, a))
+
+
+def rayleigh_ratio_fit(n: int, sum_squares: float) -> RatioFit:
+    r"""The Rayleigh fit of :func:`fit_rayleigh_ratio` from ``n`` ratios and :math:`\sum r_i^2`
+    (a sum that adds over blocks of the ratios).
+
+    Raises
+    ------
+    ValueError
+        No ratio, or all zero.
+    """
+    if n < 1:
+        raise ValueError("r needs at least 1 values, got 0")
+    s = math.sqrt(sum_squares / (2.0 * n))
     if not s > 0.0:
         raise ValueError("r is all zero: a Rayleigh fit needs a positive scale")
-    return RatioFit("rayleigh", s * math.sqrt(math.pi / 2.0), s, int(a.size))
+    return RatioFit("rayleigh", s * math.sqrt(math.pi / 2.0), s, int(n))
 
 
 def _log_q(fit: RatioFit, t: np.ndarray) -> np.ndarray:
@@ -478,34 +524,55 @@ class WeibullFit:
     iterations: int
 
 
-def _profile_moments(v: np.ndarray, b: float, buf: np.ndarray) -> tuple[float, float, float, float]:
-    """``sum w`` and the first three raw moments of ``v <= 0`` under the weights ``w = exp(b v) <= 1``."""
-    np.multiply(v, b, out=buf)
+def weibull_profile_sums(v: np.ndarray, b: float) -> np.ndarray:
+    r"""The sums of the profile equation of :func:`fit_weibull` over values ``v = ln x - max ln x``
+    (``<= 0``) at the shape ``b``: :math:`\sum w_i v_i^k`, ``k = 0 .. 3``, ``w = e^{b v} <= 1``. They
+    add over blocks of the values (a campaign's station-days)."""
+    buf = np.multiply(v, b)
     np.exp(buf, out=buf)
     s0 = float(buf.sum())
     buf *= v
-    m1 = float(buf.sum()) / s0
-    m2 = dot(buf, v) / s0
+    s1 = float(buf.sum())
+    s2 = dot(buf, v)
     buf *= v
-    m3 = dot(buf, v) / s0
-    return s0, m1, m2, m3
+    return np.array([s0, s1, s2, dot(buf, v)])
 
 
-def _solve_profile(v: np.ndarray, spread: float, b: float) -> tuple[float, float, int, bool]:
+def _drive(steps: Generator, sums: Callable[[float], np.ndarray]):
+    """Run a generator that yields the shapes ``b`` it needs :func:`weibull_profile_sums` at."""
+    try:
+        b = next(steps)
+        while True:
+            b = steps.send(sums(b))
+    except StopIteration as stop:
+        return stop.value
+
+
+def _solve_profile(
+    sums: Callable[[float], np.ndarray], n: int, spread: float, b: float
+) -> tuple[float, float, int, bool]:
+    """:func:`_profile_root` with the sums of ``sums(b)``."""
+    return _drive(_profile_root(n, spread, b), sums)
+
+
+def _profile_root(
+    n: int, spread: float, b: float
+) -> Generator[float, np.ndarray, tuple[float, float, int, bool]]:
     r"""Root of :math:`h(b) = 1/b - E_b[u]` by Halley steps safeguarded by Newton and bisection.
 
-    ``v = ln x - max ln x`` and ``spread = max ln x - mean ln x`` (so :math:`u = v + ` ``spread``).
+    Yields each ``b`` it needs the :func:`weibull_profile_sums` of the ``n`` values ``v = ln x - max
+    ln x`` at, and is sent them; ``spread = max ln x - mean ln x`` (so :math:`u = v + ` ``spread``).
     Returns ``(b, ln mean(exp(b v)) at that b, evaluations, converged)``; see :func:`fit_weibull`.
     """
-    buf = np.empty_like(v)
     lo, hi = 1.0 / spread, math.inf  # h(1/max u) = max u - E[u] > 0: a lower bracket
     log_mean = math.nan
     for it in range(1, _WEIBULL_MAXITER + 1):
-        s0, m1, m2, m3 = _profile_moments(v, b, buf)
+        s0, s1, s2, s3 = (float(x) for x in (yield b))
+        m1, m2, m3 = s1 / s0, s2 / s0, s3 / s0
         var = max(m2 - m1 * m1, 0.0)
         h = 1.0 / b - spread - m1
         if h == 0.0:
-            return b, math.log(s0 / v.size), it, True
+            return b, math.log(s0 / n), it, True
         if h > 0.0:
             lo = max(lo, b)
         else:
@@ -520,24 +587,61 @@ def _solve_profile(v: np.ndarray, spread: float, b: float) -> tuple[float, float
             new = math.sqrt(lo * hi) if math.isfinite(hi) else 2.0 * b  # bisection (geometric)
         step = new - b
         # ln mean(e^{b v}) at the new b, second-order Taylor from this evaluation (the last step is tiny)
-        log_mean = math.log(s0 / v.size) + m1 * step + 0.5 * var * step * step
+        log_mean = math.log(s0 / n) + m1 * step + 0.5 * var * step * step
         if abs(step) <= _WEIBULL_STEP_RTOL * b:
             return new, log_mean, it, True
         b = new
     return b, log_mean, _WEIBULL_MAXITER, False
 
 
-def _weibull_start(v: np.ndarray) -> tuple[float, int]:
+def weibull_start_stride(n: int) -> int:
+    """Every how many values (in their order) :func:`fit_weibull` takes the sample it starts from:
+    all of them up to 131072 values, else a regular subsample of about 65536."""
+    return 1 if n <= _WEIBULL_SUBSAMPLE else n // (_WEIBULL_SUBSAMPLE // 2)
+
+
+def _weibull_start(sample: np.ndarray, n: int, spread: float) -> tuple[float, int]:
     r"""Start of the profile iteration, and the evaluations spent on it: :math:`\pi/(\sqrt6\,s_u)`, exact
-    for Weibull data, refined to the root of a regular subsample of about 65536 values for large ``v``."""
-    if v.size > _WEIBULL_SUBSAMPLE:
-        sub = np.ascontiguousarray(v[:: v.size // (_WEIBULL_SUBSAMPLE // 2)])
+    for Weibull data, refined to the root of the regular subsample (:func:`weibull_start_stride`) of
+    ``n`` values ``v`` above 131072 of them. ``sample``: those values of ``v``. Choice: a constant
+    subsample of values that vary starts from :math:`\pi/(\sqrt6\,\mathrm{spread})` (any start > 0
+    converges; the standard deviation of all the values would need them all at once)."""
+    if n > _WEIBULL_SUBSAMPLE:
+        sub = np.ascontiguousarray(sample)
         top = float(sub.max())
-        if float(sub.min()) < top:  # not constant (np.std of a constant array need not be 0)
-            b0 = math.pi / (math.sqrt(6.0) * float(np.std(sub)))
-            b, _, it, _ = _solve_profile(sub - top, top - float(sub.mean()), b0)
-            return b, it
-    return math.pi / (math.sqrt(6.0) * float(np.std(v))), 0
+        if not float(sub.min()) < top:  # np.std of a constant array need not be 0
+            return math.pi / (math.sqrt(6.0) * spread), 0
+        b0 = math.pi / (math.sqrt(6.0) * float(np.std(sub)))
+        shifted = sub - top
+        b, _, it, _ = _solve_profile(
+            functools.partial(weibull_profile_sums, shifted), sub.size, top - float(sub.mean()), b0
+        )
+        return b, it
+    return math.pi / (math.sqrt(6.0) * float(np.std(sample))), 0
+
+
+def weibull_fit_from_sums(
+    n: int, ymax: float, spread: float, sample: np.ndarray, sums: Callable[[float], np.ndarray]
+) -> WeibullFit:
+    r"""The ML fit of :func:`fit_weibull` from what adds over blocks of the values, for a campaign
+    read a station-day at a time: ``n`` values with :math:`\max \ln x` ``ymax`` and
+    ``spread`` :math:`= \max \ln x - \overline{\ln x}` (> 0), the start ``sample`` (the values ``v =
+    ln x - ymax`` at every :func:`weibull_start_stride`-th position) and ``sums(b)``, the
+    :func:`weibull_profile_sums` of all ``v`` added over the blocks. Equal to :func:`fit_weibull`
+    of the values to the last bit when the blocks' sums are added in the same order."""
+    return _drive(weibull_fit_steps(n, ymax, spread, sample), sums)
+
+
+def weibull_fit_steps(
+    n: int, ymax: float, spread: float, sample: np.ndarray
+) -> Generator[float, np.ndarray, WeibullFit]:
+    """:func:`weibull_fit_from_sums` as a generator: it yields each shape ``b`` it needs the
+    :func:`weibull_profile_sums` of all values at, is sent them, and returns the fit (so that a
+    campaign evaluates the fits of both axes in one pass over its station-days)."""
+    b, iterations = _weibull_start(sample, n, spread)
+    b, log_mean, it, converged = yield from _profile_root(n, spread, b)
+    log_a = -(b * ymax + log_mean)
+    return WeibullFit(math.exp(log_a), b, int(n), converged, iterations + it)
 
 
 def fit_weibull(x: np.ndarray) -> WeibullFit:
@@ -592,10 +696,8 @@ def fit_weibull(x: np.ndarray) -> WeibullFit:
     spread = ymax - ybar
     if not float(v.min()) < 0.0:
         raise ValueError("x is constant: the Weibull ML shape is infinite")
-    b, iterations = _weibull_start(v)
-    b, log_mean, it, converged = _solve_profile(v, spread, b)
-    log_a = -(b * ymax + log_mean)
-    return WeibullFit(math.exp(log_a), b, int(a_.size), converged, iterations + it)
+    sample = v[:: weibull_start_stride(v.size)]
+    return weibull_fit_from_sums(v.size, ymax, spread, sample, functools.partial(weibull_profile_sums, v))
 
 
 def _log_ax_b(fit: WeibullFit, x: np.ndarray) -> np.ndarray:
@@ -673,14 +775,30 @@ def weibull_covariance(fit: WeibullFit, x: np.ndarray, n_effective: float) -> np
         y = np.log(a_)
     if not math.isfinite(float(y.sum())):
         raise ValueError("x must be finite and > 0")
+    return weibull_covariance_from_sums(fit, weibull_information_sums(y, fit), a_.size, ne)
+
+
+def weibull_information_sums(y: np.ndarray, fit: WeibullFit) -> np.ndarray:
+    r""":math:`\sum z_i`, :math:`\sum z_i y_i`, :math:`\sum z_i y_i^2` with :math:`y = \ln x`,
+    :math:`z = a x^b`: the sums of the observed information of :func:`weibull_covariance`, which add
+    over blocks of the values."""
     z = np.multiply(y, fit.b)
     z += math.log(fit.a)
     np.exp(z, out=z)  # a x^b
-    n = a_.size
-    j11 = float(z.sum()) / n
-    j12 = dot(z, y) / n
+    s0 = float(z.sum())
+    s1 = dot(z, y)
     z *= y
-    j22 = 1.0 / fit.b**2 + dot(z, y) / n
+    return np.array([s0, s1, dot(z, y)])
+
+
+def weibull_covariance_from_sums(fit: WeibullFit, sums: np.ndarray, n: int, n_effective: float) -> np.ndarray:
+    """:func:`weibull_covariance` from the :func:`weibull_information_sums` of its ``n`` values."""
+    ne = float(n_effective)
+    if not (math.isfinite(ne) and ne > 0.0):
+        raise ValueError(f"n_effective must be finite and > 0, got {n_effective!r}")
+    s0, s1, s2 = (float(x) for x in sums)
+    j11, j12 = s0 / n, s1 / n
+    j22 = 1.0 / fit.b**2 + s2 / n
     return np.linalg.inv(np.array([[j11, j12], [j12, j22]])) / ne
 
 
