@@ -9,12 +9,13 @@ path (``count_kpis`` on one station-year read whole), run here on one station of
     python bench/bench_campaign.py                             # 10 stations x 365 days
     python bench/bench_campaign.py --stations 2 --days 30      # a quick look
     python bench/bench_campaign.py --dataset /big/disk/net     # keep (and reuse) the dataset
+    python bench/bench_campaign.py --dataset /big/disk/net --only-full   # the full default analysis only
 
 The counting runs three times without the cache: first with the files as the simulation left them
 (partly in the page cache), then on 2 and on 1 worker with the columns it reads in the page cache
 (both in the same state, for the speed-up). Then the counting with the verdicts' evidence, and the
-incremental re-analysis of both; the counting, verdicts and EVT tail extrapolation; and with the
-PL confidence level too (every method that runs by partition).
+incremental re-analysis of both; the counting, verdicts and EVT tail extrapolation; with the
+PL confidence level too; and the full default analysis (the parametric analysis too).
 
 Every step runs as ``overbound`` (or a child Python) in its own process tree, whose summed
 resident memory is sampled every 0.1 s: "peak MB" is the peak of all its processes together

@@ -25,12 +25,15 @@ DAY_US = 86_400_000_000
 T0 = 1_388_534_400_000_000 + 3 * DAY_US  # a GPS midnight
 
 
-def _network(seed: int, *, stations: int = 3, days: int = 3, step_s: float = 10.0) -> pl.DataFrame:
+def _network(
+    seed: int, *, stations: int = 3, days: int = 3, step_s: float = 10.0, late: tuple[int, ...] = ()
+) -> pl.DataFrame:
+    """``late``: the stations that start a day late."""
     rng = np.random.default_rng(seed)
     frames = []
     n = int(days * 86400 / step_s)
     for k in range(stations):
-        t = T0 + (np.arange(n) * step_s * 1e6).astype(np.int64)
+        t = T0 + (np.arange(n) * step_s * 1e6).astype(np.int64) + DAY_US * (k in late)
         jitter = rng.random(n) < 0.1
         t[jitter] += rng.integers(1, 3_000_000, jitter.sum())
         keep = rng.random(n) > 0.1
@@ -110,6 +113,15 @@ def test_partitions_equal_the_pooled_table(seed: int, tmp_path) -> None:
     assert want.horizontal.n_no_solution > 0
 
 
+def test_stations_that_start_on_different_days_pool_in_the_tables_order(tmp_path) -> None:
+    """The pooled table orders the stations by name (the dataset's order), not by their first day."""
+    ds = _dataset(_network(11, late=(0,)), tmp_path)
+    pooled, _ = read_dataset(ds, columns=("alert",))
+    assert pooled["station"][0] == "LONE" and pooled["time"].min() < pooled.filter(station="LONE")["time"][0]
+    want = parametric_analysis(pooled)
+    assert_same(campaign_parametric(partitions(ds)[::-1]), want)
+
+
 def test_subsampled_grids_equal_the_pooled_table(tmp_path, monkeypatch) -> None:
     """Long campaigns: the ACF on every q-th slot and the Weibull fit started on a subsample (the
     limits lowered so that a small network reaches them)."""
@@ -159,3 +171,24 @@ def test_bad_options_are_refused_before_any_pass(tmp_path) -> None:
         campaign_parametric(partitions(ds), confidence=1.5)
     with pytest.raises(ValueError):
         campaign_parametric(partitions(ds), decorrelation="soon")
+
+
+def test_parametric_command_on_a_dataset_equals_its_epochs_as_one_file(tmp_path) -> None:
+    """``overbound parametric DATASET`` runs by partition; its JSON equals that of the same epochs as
+    one file, and its page says why the figures drawn from the epochs are left out."""
+    from click.testing import CliRunner
+
+    from overbound.cli import main
+    from overbound.io.table import write_epochs
+
+    ds = _dataset(_network(12, stations=2, days=2), tmp_path)
+    pooled, _ = read_dataset(ds, columns=("alert",))
+    write_epochs(pooled, tmp_path / "one.parquet")
+    for src, out in ((ds, "by-parts"), (tmp_path / "one.parquet", "file")):
+        args = ["parametric", str(src), "-o", str(tmp_path / out), "--service", "LPV"]
+        res = CliRunner().invoke(main, args)
+        assert res.exit_code == 0, res.output
+    by_parts, by_file = ((tmp_path / d / "parametric.json").read_text() for d in ("by-parts", "file"))
+    assert by_parts == by_file and '"weibull"' in by_parts
+    page = (tmp_path / "by-parts" / "parametric.html").read_text()
+    assert "a dataset analysed partition by partition" in page

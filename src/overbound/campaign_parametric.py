@@ -22,7 +22,6 @@ the same blocks, their sums added in the same order, integer counts.
 
 from __future__ import annotations
 
-import itertools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -67,13 +66,13 @@ from overbound.methods.parametric_partitions import (
     block_profile,
     block_second,
     fitted_block,
+    interval_across,
     second_inputs,
 )
-from overbound.methods.pooling import PE_PL
+from overbound.methods.pooling import alert_flags, axis_columns, solution_rows
 from overbound.services import ServiceLevel
 from overbound.stats.continuity import WindowCounter, availability_ranks, curve_from_counts, pool_curves
-from overbound.stats.dependence import interval_from_steps, step_counts
-from overbound.stats.mergeable import BinCounts, merge_counts
+from overbound.stats.dependence import step_counts
 from overbound.stats.parametric import weibull_fit_steps
 
 __all__ = ["campaign_parametric"]
@@ -82,7 +81,7 @@ _ERRORS = (InputError, OSError, pl.exceptions.PolarsError, ValueError)
 
 
 @dataclass(frozen=True)
-class _Rows:
+class _PartitionRows:
     """Pass 1 of a partition's rows: their number, first and last time and steps (µs), and per axis
     the rows available at each service alert limit (PL < AL, no alert)."""
 
@@ -93,58 +92,41 @@ class _Rows:
     n_available: dict[str, np.ndarray]
 
 
-def _arrays(table: pl.DataFrame) -> tuple[np.ndarray, np.ndarray]:
-    """The partition's times (µs) and alert flags, in row order."""
-    t = as_numpy(table["time"]).astype(np.int64, copy=False)
-    alert = (
-        as_numpy(table["alert"].fill_null(False)).astype(bool)
-        if "alert" in table.columns
-        else np.zeros(t.size, dtype=bool)
-    )
-    return t, alert
+class _Partition:
+    """A partition's columns as the parametric analysis reads them (the pooled table's rules of
+    :mod:`overbound.methods.pooling`): times (µs) and alerts of its rows in row order, and per axis
+    its solution epochs and the PL of every row with alerts as +inf (the counting's convention)."""
 
+    def __init__(self, partition: Partition, window: Window) -> None:
+        self.table = _read(partition, window)
+        self.t = as_numpy(self.table["time"]).astype(np.int64, copy=False)
+        self.alert = alert_flags(self.table)
 
-def _pl_column(table: pl.DataFrame, axis: str, alert: np.ndarray) -> np.ndarray:
-    """The axis' PL of every row, alerts as +inf (the counting's convention)."""
-    x = as_numpy(table[PE_PL[axis][1]]).astype(np.float64, copy=False)
-    return np.where(alert & ~np.isnan(x), np.inf, x)
+    def block(self, axis: str) -> FittedBlock | None:
+        """The solution epochs of ``axis`` (``None`` without one)."""
+        pe, x = axis_columns(self.table, axis, signed=axis == "vertical")
+        order = solution_rows(self.t, np.zeros(self.t.size, dtype=np.int64), pe, x)
+        if order.size == 0:
+            return None
+        return fitted_block(self.t[order], pe[order], x[order], self.alert[order])
 
-
-def _block(table: pl.DataFrame, axis: str, t: np.ndarray, alert: np.ndarray) -> FittedBlock | None:
-    """The partition's solution epochs of ``axis`` as ``pool_epochs`` takes them (finite PE and PL,
-    PL > 0, in time order, ties in row order); ``None`` without one."""
-    pe_col, pl_col = PE_PL[axis]
-    pe = as_numpy(table[pe_col]).astype(np.float64, copy=False)
-    pe = pe if axis == "vertical" else np.abs(pe)
-    x = as_numpy(table[pl_col]).astype(np.float64, copy=False)
-    ok = np.isfinite(pe) & np.isfinite(x) & (x > 0)
-    order = np.flatnonzero(ok)
-    if t.size > 1 and np.any(t[1:] < t[:-1]):
-        order = np.argsort(t, kind="stable")
-        order = order[ok[order]]
-    if order.size == 0:
-        return None
-    return fitted_block(t[order], pe[order], x[order], alert[order])
+    def pl_column(self, axis: str) -> np.ndarray:
+        x = axis_columns(self.table, axis)[1]
+        return np.where(self.alert & ~np.isnan(x), np.inf, x)
 
 
 def _first_task(partition: Partition, window: Window, als: dict[str, np.ndarray]) -> _Done:
     try:
-        table = _read(partition, window)
-        t, alert = _arrays(table)
-        blocks = {}
+        part = _Partition(partition, window)
+        t = part.t
+        blocks, n_avail = {}, {}
         for a in AXES:
-            b = _block(table, a, t, alert)
+            b = part.block(a)
             blocks[a] = None if b is None else block_first(b, partition.station, als[a])
-        n_avail = {
-            a: np.array([np.count_nonzero(_pl_column(table, a, alert) < al) for al in als[a]]) for a in AXES
-        }
-        rows = _Rows(
-            int(t.size),
-            int(t.min()) if t.size else None,
-            int(t.max()) if t.size else None,
-            step_counts(np.diff(t)),
-            n_avail,
-        )
+            column = part.pl_column(a)
+            n_avail[a] = np.array([np.count_nonzero(column < al) for al in als[a]], dtype=np.int64)
+        first, last = (int(t.min()), int(t.max())) if t.size else (None, None)
+        rows = _PartitionRows(int(t.size), first, last, step_counts(np.diff(t)), n_avail)
     except _ERRORS as exc:
         return _Done(None, (_failure(partition, exc),))
     return _Done([(partition.key, blocks, rows)], computed=1)
@@ -169,28 +151,28 @@ class _StationPlan:
 def _second_task(parts: list[Partition], plan: _StationPlan, window: Window) -> _Done:
     """Pass 2 of one station, its partitions in time order."""
     grid = plan.grids[parts[0].station]
-    counters = {}
-    for a, windows in plan.als.items():
-        for w, al in windows.items():
-            slots = 1 if grid is None or grid[1] / 1e6 > w else max(1, round(w / (grid[1] / 1e6)))
-            counters[a, w] = WindowCounter(al.size, slots)
+    interval_s = None if grid is None else grid[1] / 1e6
+    counters = {
+        (a, w): WindowCounter.for_grid(al.size, interval_s, w)
+        for a, windows in plan.als.items()
+        for w, al in windows.items()
+    }
     out: dict[str, list] = {a: [] for a in plan.plans}
     try:
         for p in parts:
-            table = _read(p, _cut(p, window))
-            t, alert = _arrays(table)
+            part = _Partition(p, _cut(p, window))
             for a, ap in plan.plans.items():
                 if (i := plan.index[a].get(p.key)) is not None:
-                    out[a].append((i, block_second(_block(table, a, t, alert), ap, i, a)))
-            if grid is None or t.size == 0:
+                    out[a].append((i, block_second(part.block(a), ap, i, a)))
+            if grid is None or part.t.size == 0:
                 continue
-            k = (t - (grid[0] - grid[1] // 2)) // grid[1]
+            k = (part.t - (grid[0] - grid[1] // 2)) // grid[1]  # slot_grid's nearest slot
+            columns = {a: part.pl_column(a) for a in plan.als}
             for (a, w), c in counters.items():
-                if c.w == 1 and grid[1] / 1e6 > w:
-                    continue  # the interval is longer than the window: nothing counted
-                dense = np.full(int(k[-1] - k[0]) + 1, c.n_al, dtype=c.dtype)
-                dense[k - k[0]] = availability_ranks(plan.als[a][w], _pl_column(table, a, alert))
-                c.feed(int(k[0]), dense)
+                if not c.counts_nothing:
+                    dense = np.full(int(k[-1] - k[0]) + 1, c.n_al, dtype=c.dtype)
+                    dense[k - k[0]] = availability_ranks(plan.als[a][w], columns[a])
+                    c.feed(int(k[0]), dense)
     except _ERRORS as exc:
         return _Done(None, (_failure(p, exc),))
     for c in counters.values():
@@ -203,13 +185,12 @@ def _profile_task(partition: Partition, window: Window, index: dict, fits: dict)
     """Per axis of ``fits`` (axis: ``(ymax, b)`` or a :class:`WeibullFit`), the block's profile sums
     at ``b`` or its information sums at the fit."""
     try:
-        table = _read(partition, window)
-        t, alert = _arrays(table)
+        part = _Partition(partition, window)
         out = {}
         for a, f in fits.items():
             if (i := index[a].get(partition.key)) is None:
                 continue
-            b = _block(table, a, t, alert)
+            b = part.block(a)
             out[a] = [(i, block_profile(b, *f) if isinstance(f, tuple) else block_information(b, f))]
     except _ERRORS as exc:
         return _Done(None, (_failure(partition, exc),))
@@ -235,7 +216,8 @@ def campaign_parametric(
     progress: Callable[[str, int, int], None] | None = None,
 ) -> ParametricAnalysis:
     """:func:`~overbound.methods.parametric.parametric_analysis` of the pooled table of ``parts``
-    (the partitions the counting read, in dataset order), on ``client`` (Dask) or in this process.
+    (the partitions the counting read: pooled as :func:`~overbound.io.dataset.read_dataset` reads
+    them, stations by name, each in time order), on ``client`` (Dask) or in this process.
 
     Raises
     ------
@@ -251,8 +233,9 @@ def campaign_parametric(
     if not parts:
         raise ValueError("no partition to analyse")
     runner = _Local() if client is None else _Dask(client)
-    by_station = _by_station(sorted(parts, key=lambda p: p.date))
-    order = [p for ps in by_station.values() for p in ps]  # the pooled table's: station, then time
+    # the pooled table's order (read_dataset's): stations by name, each in time order
+    by_station = _by_station(sorted(parts, key=lambda p: (p.station, p.date)))
+    order = [p for ps in by_station.values() for p in ps]
     als = {a: service_alert_limits(svcs, a) for a in AXES}
     groups = [[(p, _cut(p, time_range), als) for p in ps] for ps in by_station.values()]
     first = _map_merged(runner, groups, _first_task, _concat, progress, "parametric pass 1")
@@ -289,8 +272,9 @@ def campaign_parametric(
             n_rows,
         )
         results.update(fitted)
+    reasons = {a: failed[a] for a in AXES if a in failed}  # the pooled analysis' order
     return ParametricAnalysis(
-        results["vertical"], results["horizontal"], failed, svcs, float(confidence), tau, n_rows
+        results["vertical"], results["horizontal"], reasons, svcs, float(confidence), tau, n_rows
     )
 
 
@@ -306,11 +290,7 @@ def _station_grids(order: list[Partition], by_key: dict) -> dict[str, tuple[int,
     grids: dict[str, tuple[int, int] | None] = {}
     for station, ps in _by_station(order).items():
         rows = [by_key[p.key][1] for p in ps if by_key[p.key][1].n_rows]
-        between = [b.first - a.last for a, b in itertools.pairwise(rows)]
-        steps = merge_counts(
-            *(BinCounts(*r.steps) for r in rows), BinCounts(*step_counts(np.array(between, dtype=np.int64)))
-        )
-        dt = interval_from_steps(steps.bins, steps.counts)
+        dt = interval_across([(station, r.first, r.last, r.steps) for r in rows]) if rows else None
         grids[station] = None if dt is None else (rows[0].first, int(dt))
     return grids
 
@@ -348,7 +328,10 @@ def _fit_axes(
             {float(al): int(n) for al, n in zip(service_alert_limits(svcs, a), n_avail, strict=True)},
             {w: pool_curves(station_curves[a, w]) for w in curve_als[a]},
         )
-        out[a] = axis_result(a, plan, merged[a], fits[a], deps[a], info.get(a), counts, svcs, confidence)
+        try:  # as the pooled analysis: an axis that fails here is null with its reason
+            out[a] = axis_result(a, plan, merged[a], fits[a], deps[a], info.get(a), counts, svcs, confidence)
+        except (InputError, ValueError) as exc:
+            out[a] = _reason(exc)
     return out
 
 

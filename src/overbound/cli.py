@@ -925,21 +925,26 @@ def _decorrelation_option(ctx, param, value: str) -> str | float:
 @_with_input_options
 @_draws_figures
 def parametric(inputs, out_dir, services, decorrelation, confidence, **inputs_opts) -> None:
-    """Parametric integrity, availability and continuity (Kannemans 2006): OUTPUT/parametric.json, .html."""
+    """Parametric integrity, availability and continuity (Kannemans 2006): OUTPUT/parametric.json, .html.
+
+    A dataset (see 'overbound ingest') is analysed partition by partition, in this process.
+    """
     from overbound.analysis import load_epochs
-    from overbound.report.parametric import run_parametric
+    from overbound.report.parametric import run_parametric, write_parametric_run
 
     read_options = _read_options(**inputs_opts)
+    options = {"services": list(services) or None, "decorrelation": decorrelation, "confidence": confidence}
     with _staged(out_dir, "parametric") as stage, _progress() as bar:
         bar.add_task("parametric availability, integrity and continuity", total=None)
-        table, _ = load_epochs(list(inputs), columns=("alert",), **read_options)
-        run = run_parametric(
-            table,
-            stage.path,
-            services=list(services) or None,
-            decorrelation=decorrelation,
-            confidence=confidence,
-        )
+        if len(inputs) == 1 and is_dataset(inputs[0]):
+            from overbound.campaign import partitions_in
+            from overbound.campaign_parametric import campaign_parametric
+
+            analysis = campaign_parametric(partitions_in(inputs[0]), **options)
+            run = write_parametric_run(analysis, stage.path)
+        else:
+            table, _ = load_epochs(list(inputs), columns=("alert",), **read_options)
+            run = run_parametric(table, stage.path, **options)
     for line in _parametric_lines(run.analysis):
         console.print(line, highlight=False, soft_wrap=True)
     click.echo(f"parametric: {stage.final(run.json_path)}")

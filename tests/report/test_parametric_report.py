@@ -131,7 +131,7 @@ def test_tiny_p_mi_is_shown_from_log10_never_as_zero(tiny):
     per_exposure = brief["services"]["LPV-200"]["log10_p_hmi_bound_per_exposure"]
     assert per_exposure == pytest.approx(s.log10_p_hmi_bound + math.log10(150.0 / v.interval_s))
     assert brief["services"]["LPV-200"]["meets_integrity"] is True
-    assert "Not drawn: timeseries (no epoch table given)" in html
+    assert "Not drawn: timeseries (the epochs are not at hand: no epoch table given" in html
 
 
 def test_union_bound_per_exposure():

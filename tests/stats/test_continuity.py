@@ -288,3 +288,25 @@ def test_window_counter_refuses_slots_out_of_order():
     c.feed(10, np.zeros(8, dtype=np.int16))
     with pytest.raises(ValueError, match="in order"):
         c.feed(12, np.zeros(2, dtype=np.int16))
+
+
+def test_window_counter_keeps_a_long_gap_as_one_window_of_missing_slots():
+    """Two runs a year of slots apart: the counts of the whole station, with the counter holding
+    a few slots, not the gap."""
+    from overbound.stats.continuity import WindowCounter, availability_ranks
+
+    rng = np.random.default_rng(3)
+    al = np.linspace(5.0, 30.0, 26)
+    runs = [np.arange(0, 500), np.arange(31_536_000, 31_536_700)]
+    t = np.concatenate(runs).astype(np.int64) * 1_000_000
+    pl = rng.gamma(4.0, 4.0, size=t.size)
+    whole = noncontinuity_curve(t, pl, al, window_s=15.0)
+    counter = WindowCounter(al.size, 15)
+    ranks = availability_ranks(al, pl)
+    counter.feed(0, ranks[:500])
+    counter.feed(31_536_000, ranks[500:])
+    assert counter._pending.size == 15 + 1  # the slots of the windows not yet counted, not the gap
+    counter.finish()
+    for got, want in zip(counter.counts(), (whole.n_windows, whole.n_fail, whole.n_events), strict=True):
+        assert np.array_equal(got, want)
+    assert whole.n_fail.max() > 0

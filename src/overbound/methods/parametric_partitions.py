@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -59,6 +60,7 @@ __all__ = [
     "block_profile",
     "block_second",
     "fitted_block",
+    "interval_across",
     "second_inputs",
 ]
 
@@ -187,19 +189,22 @@ class AxisPlan:
     at_or_above: np.ndarray
 
 
-def _pooled_interval(blocks: list[BlockFirst]) -> int:
-    """The pooled series' interval: the steps within each block and between consecutive blocks of a
-    station (``pooling._interval_us``'s rule)."""
-    between = [c.first - p.last for p, c in itertools.pairwise(blocks) if c.station == p.station]
+def interval_across(parts: Sequence[tuple[object, int, int, tuple[np.ndarray, np.ndarray]]]) -> int | None:
+    """The nominal interval (µs) of series cut into parts ``(station, first, last, steps)`` (in
+    order; ``steps`` the value counts of the steps inside the part): the steps inside the parts and
+    between consecutive parts of a station, by :func:`~overbound.stats.dependence.interval_from_steps`
+    (the rule of ``nominal_interval_us`` on the whole series). ``None`` without a step."""
+    between = [b[1] - a[2] for a, b in itertools.pairwise(parts) if a[0] == b[0]]
     merged = merge_counts(
-        *(BinCounts(*b.steps) for b in blocks), BinCounts(*step_counts(np.array(between, dtype=np.int64)))
+        *(BinCounts(*p[3]) for p in parts), BinCounts(*step_counts(np.array(between, dtype=np.int64)))
     )
-    return interval_from_steps(merged.bins, merged.counts) or 1_000_000
+    return interval_from_steps(merged.bins, merged.counts)
 
 
 def axis_plan(blocks: list[BlockFirst]) -> AxisPlan:
     """Merge pass 1 of all blocks (in pooled order, those with a solution epoch)."""
-    dt = _pooled_interval(blocks)
+    # the pooled series' interval: pooling._interval_us's rule
+    dt = interval_across([(b.station, b.first, b.last, b.steps) for b in blocks]) or 1_000_000
     stations: dict[object, list[int]] = {}
     for b in blocks:
         span = stations.setdefault(b.station, [b.first, b.last])

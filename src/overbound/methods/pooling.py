@@ -16,7 +16,15 @@ import polars as pl
 from overbound.io.schema import InputError, as_numpy
 from overbound.stats.dependence import interval_from_steps, step_counts
 
-__all__ = ["PE_PL", "PooledEpochs", "pool_epochs", "pooled_offsets"]
+__all__ = [
+    "PE_PL",
+    "PooledEpochs",
+    "alert_flags",
+    "axis_columns",
+    "pool_epochs",
+    "pooled_offsets",
+    "solution_rows",
+]
 
 #: Position-error and protection-level columns of each axis.
 PE_PL = {"vertical": ("vpe", "vpl"), "horizontal": ("hpe", "hpl")}
@@ -86,6 +94,30 @@ def _sorted(t: np.ndarray, codes: np.ndarray) -> bool:
     return bool(np.all(dc >= 0) and np.all((np.diff(t) > 0) | (dc > 0)))
 
 
+def axis_columns(table: pl.DataFrame, axis: str, *, signed: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """The PE (``|PE|`` unless ``signed``) and PL of ``axis`` of every row, as float64."""
+    pe_col, pl_col = PE_PL[axis]
+    pe = as_numpy(table[pe_col]).astype(np.float64, copy=False)
+    return (pe if signed else np.abs(pe)), as_numpy(table[pl_col]).astype(np.float64, copy=False)
+
+
+def alert_flags(table: pl.DataFrame) -> np.ndarray:
+    """The receiver's alert flag of every row (missing: ``False``; no column: all ``False``)."""
+    if "alert" in table.columns:
+        return as_numpy(table["alert"].fill_null(False)).astype(bool)
+    return np.zeros(table.height, dtype=bool)
+
+
+def solution_rows(t: np.ndarray, codes: np.ndarray, pe: np.ndarray, pl: np.ndarray) -> np.ndarray:
+    """The rows with a solution (finite PE and PL, PL > 0) in pooled order: by station code, in
+    time order within a station, ties in row order."""
+    ok = np.isfinite(pe) & np.isfinite(pl) & (pl > 0)
+    if _sorted(t, codes):  # the usual case (one station, in time order): no sort, one gather
+        return np.flatnonzero(ok)
+    order = np.lexsort((t, codes))
+    return order[ok[order]]
+
+
 def pool_epochs(table: pl.DataFrame, axis: str, *, signed: bool = False) -> PooledEpochs:
     """Pool the solution epochs of ``axis`` (``vertical`` or ``horizontal``) of an epoch table.
 
@@ -102,22 +134,11 @@ def pool_epochs(table: pl.DataFrame, axis: str, *, signed: bool = False) -> Pool
     missing = [c for c in ("time", "station", pe_col, pl_col) if c not in table.columns]
     if missing:
         raise InputError("<epoch table>", f"the {axis} analysis needs column(s) {', '.join(missing)}")
-    pe = as_numpy(table[pe_col]).astype(np.float64, copy=False)
-    pe = pe if signed else np.abs(pe)
-    pls = as_numpy(table[pl_col]).astype(np.float64, copy=False)
+    pe, pls = axis_columns(table, axis, signed=signed)
     t = as_numpy(table["time"]).astype(np.int64, copy=False)
     codes = _station_codes(table["station"])
-    alert = (
-        as_numpy(table["alert"].fill_null(False)).astype(bool)
-        if "alert" in table.columns
-        else np.zeros(t.size, dtype=bool)
-    )
-    ok = np.isfinite(pe) & np.isfinite(pls) & (pls > 0)
-    if _sorted(t, codes):  # the usual case (one station, in time order): no sort, one gather
-        order = np.flatnonzero(ok)
-    else:
-        order = np.lexsort((t, codes))
-        order = order[ok[order]]
+    alert = alert_flags(table)
+    order = solution_rows(t, codes, pe, pls)
     t, codes, pe, pls, alert = t[order], codes[order], pe[order], pls[order], alert[order]
     if t.size == 0:
         raise InputError("<epoch table>", "no epoch with a solution")

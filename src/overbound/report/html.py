@@ -130,7 +130,8 @@ def render_report(
         *(_failure_section(*failure) for failure in analysis.method_failures),
         *(_evt_section(analysis, axis, item) for axis, item in _evt_items(analysis)),
         *(
-            (parametric_section_html(analysis.parametric, analysis.table, timeseries=False),)
+            # a dataset's analysis gathers no epochs: the figures drawn from them are left out
+            (parametric_section_html(analysis.parametric, _epochs(analysis), timeseries=False),)
             if analysis.parametric is not None
             else ()
         ),
@@ -835,6 +836,12 @@ _REFERENCES: tuple[str, ...] = (
     "Hyndman, R. J., Fan, Y. (1996), Sample quantiles in statistical packages, The American "
     "Statistician 50(4), 361–365.",
 )
+
+
+def _epochs(analysis: Analysis):
+    """The analysed epoch table (a ``polars.DataFrame``), ``None`` for a dataset (analysed partition
+    by partition)."""
+    return None if analysis.network is not None else analysis.table
 
 
 def _method_notes(c: CountingResult) -> str:

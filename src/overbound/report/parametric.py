@@ -577,7 +577,11 @@ def _figures(
     sid = f"parametric-{a.axis}"
     ratio, pe, pl_ = _RATIO[a.axis], _PE[a.axis], _PL[a.axis]
     series = None if table is None else analysed_series(table, a)
-    why = "no epoch table given" if table is None else "the table is not the analysed one"
+    why = (
+        "the epochs are not at hand: no epoch table given, or a dataset analysed partition by partition"
+        if table is None
+        else "the table is not the analysed one"
+    )
     drawn: list[tuple[bool, str]] = []  # (full width, HTML)
     skipped: list[str] = []
     levels = _levels(analysis)
@@ -894,6 +898,18 @@ def run_parametric(
         decorrelation=decorrelation,
         confidence=confidence,
     )
+    return write_parametric_run(analysis, directory, title=title, table=table)
+
+
+def write_parametric_run(
+    analysis: ParametricAnalysis,
+    directory: str | Path,
+    *,
+    title: str = "Parametric availability, integrity and continuity",
+    table: pl.DataFrame | None = None,
+) -> ParametricRun:
+    """Write ``parametric.json`` and ``parametric.html`` of ``analysis`` into ``directory``
+    (``table``: the analysed epochs, for the figures drawn from them; a dataset's analysis has none)."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     json_path = directory / JSON_NAME

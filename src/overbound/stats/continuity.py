@@ -245,15 +245,27 @@ class WindowCounter:
     the start, ``-1`` at the end), by chunks. Integer counts: the same whatever the runs fed.
     """
 
-    def __init__(self, n_al: int, w: int) -> None:
+    def __init__(self, n_al: int, w: int, *, counts_nothing: bool = False) -> None:
         self.n_al, self.w = int(n_al), int(w)
+        #: The station's windows are not counted (no grid, or an interval longer than the window).
+        self.counts_nothing = counts_nothing
         self._dtype = np.int16 if n_al < np.iinfo(np.int16).max else np.int32
         self._pending = np.empty(0, dtype=self._dtype)  # slots not yet a counted window start
-        self._next = 0  # grid index of _pending[0]
+        self._last: int | None = None  # grid index of the last slot fed
         self._prev: tuple[int, int] | None = None  # (lo, hi) of the last start counted
         self._min = self.n_al  # lowest rank of the starts counted
         self._diff = np.zeros((3, self.n_al + 1), dtype=np.int64)
         self._first = np.zeros(self.n_al, dtype=np.int64)
+
+    @classmethod
+    def for_grid(cls, n_al: int, interval_s: float | None, window_s: float) -> WindowCounter:
+        """The counter of a station whose grid has ``interval_s`` (``None``: fewer than two epoch
+        times), for windows of ``window_s``: ``round(T/Δ)`` slots (at least one); a counter fed
+        nothing (all counts zero, one slot) when there is no grid or its interval is longer than
+        the window (``counts_nothing``)."""
+        if interval_s is None or interval_s > window_s:
+            return cls(n_al, 1, counts_nothing=True)
+        return cls(n_al, max(1, round(window_s / interval_s)))
 
     @property
     def dtype(self) -> np.dtype:
@@ -264,19 +276,24 @@ class WindowCounter:
         """The ranks of the consecutive slots from ``first_slot`` on. Slots skipped since the last
         feed are missing (never available); a first slot equal to the last slot fed replaces it
         (the later epoch sets a shared slot, as numpy's fancy assignment of one table does).
-        ``last``: no slot follows, the last windows are counted."""
-        end = self._next + self._pending.size
-        if self._pending.size and first_slot < end - 1:
-            raise ValueError(f"slot {first_slot} fed after slot {end - 1}: slots must be fed in order")
+        ``last``: no slot follows, the last windows are counted.
+
+        A gap longer than a window is kept as ``w`` missing slots: the windows before it fail the
+        same, and a window starting on a missing slot counts nothing (memory stays bounded by the
+        runs fed, not by the span of the station)."""
+        if self.counts_nothing:
+            return
         r = np.asarray(ranks, dtype=self._dtype)
-        if not self._pending.size:
-            self._next = first_slot
+        if self._last is None or not self._pending.size:
             buf = r
-        elif first_slot == end - 1:
+        elif first_slot == self._last:
             buf = np.concatenate([self._pending[:-1], r])
-        else:
-            gap = np.full(first_slot - end, self.n_al, dtype=self._dtype)
+        elif first_slot > self._last:
+            gap = np.full(min(first_slot - self._last - 1, self.w), self.n_al, dtype=self._dtype)
             buf = np.concatenate([self._pending, gap, r])
+        else:
+            raise ValueError(f"slot {first_slot} fed after slot {self._last}: slots must be fed in order")
+        self._last = first_slot + r.size - 1
         self._pending = buf
         self._count(last)
 
@@ -292,7 +309,6 @@ class WindowCounter:
             e = min(s + _CHUNK, n_starts)
             self._add(buf[s:e], peak[s:e])
         self._pending = buf[n_starts:].copy()
-        self._next += n_starts
 
     def _add(self, lo: np.ndarray, peak: np.ndarray) -> None:
         n = self.n_al + 1
@@ -467,13 +483,10 @@ def noncontinuity_curve(
     n_al = al.size
     zeros = np.zeros(n_al, dtype=np.int64)
     grid = sg._grid
-    if grid is None or grid.interval_s > window_s:
-        return curve_from_counts(al, zeros, zeros.copy(), zeros.copy(), 1, window_s, confidence)
-    w = max(1, round(window_s / grid.interval_s))
-    k_starts = grid.size - w
-    if k_starts <= 0:
+    counter = WindowCounter.for_grid(n_al, None if grid is None else grid.interval_s, window_s)
+    w = counter.w
+    if counter.counts_nothing or grid.size - w <= 0:
         return curve_from_counts(al, zeros, zeros.copy(), zeros.copy(), w, window_s, confidence)
-    counter = WindowCounter(n_al, w)
     rank = np.full(grid.size, n_al, dtype=counter.dtype)
     rank[grid.index] = _rank(al, v)  # AL_j > v  <=>  j >= rank; a missing slot is never available
     # the rank of M_k is the largest rank of its slots (the rank is monotone in v)
