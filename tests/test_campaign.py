@@ -329,3 +329,25 @@ def test_no_method_reads_the_pooled_table(dataset: Path, tmp_path: Path, monkeyp
     done = analyze([_copy(dataset, tmp_path)], confidence=None, evt=None, evt_n_boot=20, parametric=True)
     assert done.parametric.vertical and done.parametric.horizontal and done.evt and done.confidence
     assert done.table.height == 0 and not done.method_failures
+
+
+def test_the_band_confidences_of_the_verdicts_are_computed_ahead(
+    dataset: Path, tmp_path: Path, monkeypatch
+) -> None:
+    """A dataset's analysis computes R8's confidence levels (each rated band at each service's risk)
+    on its runner: the verdicts then compute none, and are those they give computing them."""
+    import dataclasses
+
+    import overbound.verdict as verdict
+    from overbound.analysis import analyze
+
+    done = analyze([_copy(dataset, tmp_path)], confidence=None, evt=())
+    assert done.band_confidences
+    assert set(done.band_confidences) == set(verdict.band_confidence_inputs(done.confidence, done.services))
+    own = verdict.assess(dataclasses.replace(done, band_confidences={}))
+
+    def refuse(*args):
+        raise AssertionError("a band's confidence computed again")
+
+    monkeypatch.setattr(verdict, "band_confidence", refuse)
+    assert repr(verdict.assess(done)) == repr(own)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import datetime as dt
 import traceback
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -58,6 +58,9 @@ class Analysis:
     network : for a campaign dataset, its analysis by partition
         (:class:`~overbound.campaign.CampaignCounting`: per-day availability, partitions that
         could not be read, cache use); ``counting`` is then its merged result.
+    band_confidences : the confidence levels of the PL bands the verdicts re-evaluate at each
+        service's risk (R8 of :mod:`overbound.verdict`), computed ahead on a campaign's workers
+        (keys of :func:`~overbound.verdict.band_confidence_inputs`); empty: the verdicts compute them.
     """
 
     table: pl.DataFrame
@@ -72,6 +75,7 @@ class Analysis:
     evidence: Evidence | None = None
     method_failures: tuple[tuple[str, str, str], ...] = ()
     network: CampaignCounting | None = None
+    band_confidences: dict = field(default_factory=dict)
 
     @property
     def n_rejected(self) -> int:
@@ -308,11 +312,12 @@ def _analyze_campaign(
         progress=tick,
     )
     report = _campaign_report(dataset, network)
-    evt_done, cl, failures, par = ((), ()), (), [], None
+    evt_done, cl, failures, par, bands = ((), ()), (), [], None, {}
     if not counting_only:  # the methods by partition read the partitions the counting read
         failed_keys = {f.key for f in network.failures}
         parts = [p for p in partitions_in(dataset, time_range) if p.key not in failed_keys]
         cl, failures = _campaign_confidence(parts, methods, columns, client, time_range, progress)
+        bands = _band_confidences(cl, levels, client, progress)
         evt_done = _campaign_evt(parts, levels, methods, client, time_range, progress)
         par = _campaign_parametric(parts, levels, methods, client, time_range, progress, failures)
     _release(client)
@@ -329,7 +334,21 @@ def _analyze_campaign(
         evidence=network.evidence,
         method_failures=tuple(failures),
         network=network,
+        band_confidences=bands,
     )
+
+
+def _band_confidences(cl, levels, client, progress) -> dict:
+    """R8's evaluations of the verdicts (:func:`~overbound.verdict.band_confidence_inputs`), one task
+    per band on the workers: the same numbers the verdicts would compute one after the other."""
+    from overbound.campaign import _Dask, _Local
+    from overbound.verdict import band_confidence, band_confidence_inputs
+
+    inputs = band_confidence_inputs(cl, levels)
+    if progress and inputs:
+        progress(f"PL confidence level at the services' risks: {len(inputs)} bands")
+    runner = _Local() if client is None else _Dask(client)
+    return dict(zip(inputs, runner.starmap(band_confidence, list(inputs.values())), strict=True))
 
 
 def _campaign_parametric(parts, levels, methods: _Methods, client, time_range, progress, failures: list):

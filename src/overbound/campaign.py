@@ -454,6 +454,10 @@ class _Local:
     def share(self, value):
         return value
 
+    def starmap(self, fn: Callable, items: list[tuple]) -> list:
+        """``[fn(*item) for item in items]``."""
+        return [fn(*item) for item in items]
+
 
 def _batch(task, merge, items) -> _Done:
     """``task`` on consecutive partitions, one after the other, merged: one Dask task for several
@@ -497,6 +501,10 @@ class _Dask:
                 ]
             roots.append(level[0] if level else None)
         return [r.result() if r is not None else _Done(None) for r in roots]
+
+    def starmap(self, fn: Callable, items: list[tuple]) -> list:
+        """``[fn(*item) for item in items]``, one task per item on the workers, in order."""
+        return self.client.gather([self.client.submit(fn, *item, pure=False) for item in items])
 
     def share(self, value):
         # one object, under a key of its own: a dict would be scattered value by value under its own

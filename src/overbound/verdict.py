@@ -492,30 +492,50 @@ def _counted_item(ev: CountedEvents, axis: str, what: str, exposure_s: float) ->
     )
 
 
-def _band_items(cl: ConfidenceAnalysis, al: float, risk: float, cache: dict) -> list[EvidenceItem]:
-    """R8: the rated PL bands below ``al`` re-evaluated at ``risk``; one item per failing band, or
-    one supporting item."""
-    from overbound.stats.confidence import confidence_level
-
-    rated = [
+def _rated(cl: ConfidenceAnalysis, al: float) -> list:
+    """The rated bands (enough samples, a model) entirely below ``al``, with their samples."""
+    return [
         (b, smp)
         for b, smp in zip(cl.bins, cl.samples, strict=True)
         if b.sufficient and b.hi <= al and math.isfinite(b.sigma_inflated)
     ]
+
+
+def band_confidence(pl, mean: float, sigma: float, n: int, risk: float, axis: str) -> float:
+    """R8's confidence level of a band's samples at ``risk`` (NaN where it cannot be computed)."""
+    from overbound.stats.confidence import confidence_level
+
+    try:
+        return float(confidence_level(pl, mean=mean, sigma=sigma, n=n, risk=risk, axis=axis))
+    except ValueError:
+        return math.nan
+
+
+def band_confidence_inputs(confidence, services) -> dict[tuple, tuple]:
+    """Every evaluation of R8 the verdicts of ``services`` make, keyed as the verdicts' cache (axis,
+    band target, width, risk): the arguments of :func:`band_confidence`. A campaign computes them
+    on its workers and hands the values to :func:`assess` (:attr:`Analysis.band_confidences`)."""
+    out: dict[tuple, tuple] = {}
+    for cl in confidence:
+        for s in services:
+            al = s.alert_limit(cl.axis)
+            for b, smp in _rated(cl, al) if al is not None else ():
+                key = (cl.axis, b.target, b.tolerance_used, s.integrity_risk)
+                out.setdefault(key, (smp.pl, b.mean, b.sigma_inflated, b.n, s.integrity_risk, cl.axis))
+    return out
+
+
+def _band_items(cl: ConfidenceAnalysis, al: float, risk: float, cache: dict) -> list[EvidenceItem]:
+    """R8: the rated PL bands below ``al`` re-evaluated at ``risk``; one item per failing band, or
+    one supporting item."""
+    rated = _rated(cl, al)
     if not rated:
         return []
     out, worst = [], None
     for b, smp in rated:
         key = (cl.axis, b.target, b.tolerance_used, risk)
         if key not in cache:
-            try:
-                cache[key] = float(
-                    confidence_level(
-                        smp.pl, mean=b.mean, sigma=b.sigma_inflated, n=b.n, risk=risk, axis=cl.axis
-                    )
-                )
-            except ValueError:
-                cache[key] = math.nan
+            cache[key] = band_confidence(smp.pl, b.mean, b.sigma_inflated, b.n, risk, cl.axis)
         c = cache[key]
         if math.isfinite(c) and (worst is None or c < worst[1]):
             worst = (b, c)
@@ -800,7 +820,7 @@ def assess(analysis: Analysis, evidence: Evidence | None = None) -> Assessment:
     evt = {e.axis: e for e in analysis.evt}
     cl = {c.axis: c for c in analysis.confidence}
     failed = {(m, a): why for m, a, why in analysis.method_failures}
-    cache: dict = {}
+    cache: dict = dict(analysis.band_confidences)  # R8's evaluations a campaign made on its workers
 
     def ctx_of(ev: StationEvidence) -> _Context:
         interval = ev.interval_s or evidence.pooled.interval_s or 1.0
