@@ -184,10 +184,7 @@ def campaign_confidence(
     if failures:
         return _failed(tried, _Done(None, tuple(failures)))
     forward, backward = (d.partial for d in done)
-    # the statistics of the bands (the confidence level at each: most of the time) on the workers
-    out = tuple(
-        dataset_confidence(plans[a], chains[a], forward[a], backward[a], runner.starmap) for a in plans
-    )
+    out = tuple(dataset_confidence(plans[a], chains[a], forward[a], backward[a]) for a in plans)
     return ConfidenceRun(out, tuple(failed))
 
 

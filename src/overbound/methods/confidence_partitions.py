@@ -32,7 +32,7 @@ Every partial merges by integer addition, set union or an exact comparison; no f
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -568,12 +568,11 @@ def merge_picks(*parts: Picks) -> Picks:
 
 
 def dataset_confidence(
-    plan: BandPlan, chains: BandChains, forward: Picks, backward: Picks, starmap: Callable | None = None
+    plan: BandPlan, chains: BandChains, forward: Picks, backward: Picks
 ) -> ConfidenceAnalysis:
     """The :class:`ConfidenceAnalysis` from the walked chains: per target the first width walked
     whose chain reaches ``min_samples``, else the last (step 5); its samples in time order (the
-    backward walk reversed, then the forward), its statistics (step 6), computed by ``starmap(fn,
-    items)`` (default: one after the other here; a campaign runs them on its workers)."""
+    backward walk reversed, then the forward), its statistics (step 6)."""
     p = plan.parameters
     both = merge_picks(_reverse(backward), forward)
     order = np.argsort(both.chain, kind="stable")  # each chain's samples in time order
@@ -581,7 +580,7 @@ def dataset_confidence(
     walked: dict[tuple[int, int], np.ndarray] = {}
     for i, c in enumerate(chains.chains):
         walked[c.k, c.j] = order[bounds[i] : bounds[i + 1]]
-    items = []
+    bins, samples = [], []
     last = plan.widths.size - 1
     for k, target in enumerate(plan.targets.tolist()):
         j = next(
@@ -590,19 +589,23 @@ def dataset_confidence(
         )
         idx = walked.get((k, j), np.empty(0, dtype=np.intp))
         chosen = take(both.samples, idx)
-        options = {
-            "axis": plan.axis,
-            "target": target,
-            "width": float(plan.widths[j]),
-            "n_candidates": int(chains.n_candidates[k, j]),
-            "min_samples": p.min_samples,
-            "risk": p.risk,
-            "core": p.core,
-        }
-        items.append((chosen.t, chosen.row, chosen.station, chosen.pl, chosen.error, chosen.signed, options))
-    done = (starmap or _starmap)(_samples_bin, items)
-    bins = [b for b, _ in done]
-    samples = [s for _, s in done]
+        bin_, band = samples_bin(
+            chosen.t,
+            chosen.row,
+            chosen.station,
+            chosen.pl,
+            chosen.error,
+            chosen.signed,
+            axis=plan.axis,
+            target=target,
+            width=float(plan.widths[j]),
+            n_candidates=int(chains.n_candidates[k, j]),
+            min_samples=p.min_samples,
+            risk=p.risk,
+            core=p.core,
+        )
+        bins.append(bin_)
+        samples.append(band)
     return ConfidenceAnalysis(
         axis=plan.axis,
         risk=float(p.risk),
@@ -619,14 +622,6 @@ def dataset_confidence(
         bins=tuple(bins),
         samples=tuple(samples),
     )
-
-
-def _samples_bin(t, row, station, pl, error, signed, options: dict):
-    return samples_bin(t, row, station, pl, error, signed, **options)
-
-
-def _starmap(fn: Callable, items: list[tuple]) -> list:
-    return [fn(*item) for item in items]
 
 
 def _reverse(p: Picks) -> Picks:
