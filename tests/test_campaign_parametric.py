@@ -192,3 +192,20 @@ def test_parametric_command_on_a_dataset_equals_its_epochs_as_one_file(tmp_path)
     assert by_parts == by_file and '"weibull"' in by_parts
     page = (tmp_path / "by-parts" / "parametric.html").read_text()
     assert "a dataset analysed partition by partition" in page
+
+
+def test_an_axis_that_fails_after_its_fits_is_null_with_its_reason(tmp_path, monkeypatch) -> None:
+    """As in the pooled analysis, a failure in the last step of one axis leaves the other axis."""
+    import overbound.campaign_parametric as cp
+
+    real = cp.axis_result
+
+    def failing(axis, *args):
+        if axis == "horizontal":
+            raise ValueError("singular information matrix")
+        return real(axis, *args)
+
+    monkeypatch.setattr(cp, "axis_result", failing)
+    got = campaign_parametric(partitions(_dataset(_network(13, stations=2, days=2), tmp_path)))
+    assert got.vertical is not None and got.horizontal is None
+    assert got.reasons == {"horizontal": "singular information matrix"}

@@ -69,7 +69,7 @@ from overbound.methods.parametric_partitions import (
     interval_across,
     second_inputs,
 )
-from overbound.methods.pooling import alert_flags, axis_columns, solution_rows
+from overbound.methods.pooling import alert_flags, axis_columns, solution_rows, unavailable_at_alerts
 from overbound.services import ServiceLevel
 from overbound.stats.continuity import WindowCounter, availability_ranks, curve_from_counts, pool_curves
 from overbound.stats.dependence import step_counts
@@ -112,7 +112,7 @@ class _Partition:
 
     def pl_column(self, axis: str) -> np.ndarray:
         x = axis_columns(self.table, axis)[1]
-        return np.where(self.alert & ~np.isnan(x), np.inf, x)
+        return unavailable_at_alerts(x, self.alert)
 
 
 def _first_task(partition: Partition, window: Window, als: dict[str, np.ndarray]) -> _Done:
@@ -271,7 +271,11 @@ def campaign_parametric(
             progress,
             n_rows,
         )
-        results.update(fitted)
+        for a, r in fitted.items():  # an axis that failed after its fits: its reason
+            if isinstance(r, str):
+                failed[a] = r
+            else:
+                results[a] = r
     reasons = {a: failed[a] for a in AXES if a in failed}  # the pooled analysis' order
     return ParametricAnalysis(
         results["vertical"], results["horizontal"], reasons, svcs, float(confidence), tau, n_rows

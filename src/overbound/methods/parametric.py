@@ -40,7 +40,7 @@ from overbound.methods.parametric_partitions import (
     fitted_block,
     second_inputs,
 )
-from overbound.methods.pooling import PE_PL, pool_epochs
+from overbound.methods.pooling import PE_PL, pool_epochs, unavailable_at_alerts
 from overbound.services import ServiceLevel, parse_service, resolve_services
 from overbound.stats.continuity import (
     ContinuityCurve,
@@ -531,7 +531,7 @@ def continuity_grids(services: tuple[ServiceLevel, ...], axis: str, pl_range: tu
 def _row_counts(rows: _Rows, table: pl.DataFrame, axis: str, services, pl_range, confidence) -> RowCounts:
     pl_col = as_numpy(table[PE_PL[axis][1]]).astype(np.float64, copy=False)
     if rows.alert is not None:
-        pl_col = np.where(rows.alert & ~np.isnan(pl_col), np.inf, pl_col)  # counting's convention
+        pl_col = unavailable_at_alerts(pl_col, rows.alert)
     curves = {
         w: _continuity(rows, pl_col, grid, w, confidence)
         for w, grid in continuity_grids(services, axis, pl_range).items()

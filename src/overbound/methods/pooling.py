@@ -24,6 +24,7 @@ __all__ = [
     "pool_epochs",
     "pooled_offsets",
     "solution_rows",
+    "unavailable_at_alerts",
 ]
 
 #: Position-error and protection-level columns of each axis.
@@ -106,6 +107,12 @@ def alert_flags(table: pl.DataFrame) -> np.ndarray:
     if "alert" in table.columns:
         return as_numpy(table["alert"].fill_null(False)).astype(bool)
     return np.zeros(table.height, dtype=bool)
+
+
+def unavailable_at_alerts(pl: np.ndarray, alert: np.ndarray) -> np.ndarray:
+    """The PL with the epochs flagged ``alert`` (and a solution) at +inf: unavailable at every alert
+    limit (the counting's convention; NaN stays NaN, no solution)."""
+    return np.where(alert & ~np.isnan(pl), np.inf, pl)
 
 
 def solution_rows(t: np.ndarray, codes: np.ndarray, pe: np.ndarray, pl: np.ndarray) -> np.ndarray:
