@@ -267,8 +267,10 @@ def write_epochs(
     *,
     report: ReadReport | None = None,
     extra_metadata: dict | None = None,
+    compression: str = "zstd",
 ) -> Path:
-    """Write an epoch table to ``.parquet`` (zstd) or ``.csv``, chosen by the suffix.
+    """Write an epoch table to ``.parquet`` (``compression``: zstd unless told) or ``.csv``, chosen
+    by the suffix.
 
     Parameters
     ----------
@@ -276,6 +278,7 @@ def write_epochs(
     path : output file; its suffix selects the format (``.parquet``/``.pq`` or ``.csv``).
     report : the reader's report, stored in the Parquet provenance.
     extra_metadata : further JSON-serialisable provenance (Parquet only).
+    compression : the Parquet codec (polars' names).
 
     Returns
     -------
@@ -313,7 +316,7 @@ def write_epochs(
         "report": report.to_dict() if report else None,
         "extra": extra_metadata or {},
     }
-    table.write_parquet(path, compression="zstd", metadata={METADATA_KEY: json.dumps(meta, sort_keys=True)})
+    table.write_parquet(path, compression=compression, metadata={METADATA_KEY: json.dumps(meta, sort_keys=True)})
     return path
 
 
