@@ -184,7 +184,9 @@ def campaign_confidence(
     if failures:
         return _failed(tried, _Done(None, tuple(failures)))
     forward, backward = (d.partial for d in done)
-    out = tuple(dataset_confidence(plans[a], chains[a], forward[a], backward[a]) for a in plans)
+    out = tuple(
+        dataset_confidence(plans[a], chains[a], forward[a], backward[a], runner.starmap) for a in plans
+    )
     return ConfidenceRun(out, tuple(failed))
 
 

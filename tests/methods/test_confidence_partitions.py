@@ -92,6 +92,25 @@ def test_partitions_equal_the_pooled_table(seed: int, axis: str) -> None:
         assert widened and any(b.sufficient for b in want.bins), "the cases are exercised"
 
 
+def test_the_rated_bands_solves_through_a_runner_give_the_same_bins() -> None:
+    """``dataset_confidence(starmap=)``: a campaign's workers solve the rated bands (confidence
+    level, PL1, PL99), here in reverse order; the bins are those solved in place."""
+    table = _random_network(5)
+    params = ConfidenceParameters(min_samples=40)
+    items: list = []
+
+    def reverse_starmap(fn, args: list[tuple]) -> list:
+        items.extend(args)
+        return [fn(*a) for a in args[::-1]][::-1]
+
+    got = table_confidence(table, "vertical", params, reverse_starmap)
+    want = confidence_analysis(table, axis="vertical", **{k: getattr(params, k) for k in _PARAMS})
+    assert_same(got, want)
+    rated = [b for b in want.bins if b.sufficient and np.isfinite(b.confidence)]
+    assert len(items) == len(rated) > 5
+    assert [i[0].n for i in items] == [b.n for b in rated]
+
+
 _PARAMS = ("min_samples", "spacing", "tolerance", "step", "max_pl", "max_tolerance", "risk", "core")
 
 

@@ -13,6 +13,7 @@ Columns needed: ``time``, ``station``, ``vpe`` and ``vpl`` (vertical); ``hpe``,
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Collection
 from dataclasses import dataclass
@@ -581,13 +582,15 @@ def samples_bin(
     min_samples: int,
     risk: float,
     core: float,
-) -> tuple[ConfidenceBin, BandSamples]:
-    """The bin of a band and its samples (step 6) from the samples selected (in time order)."""
+    deferred: bool = False,
+):
+    """The bin of a band and its samples (step 6) from the samples selected (in time order);
+    ``deferred`` as :func:`_band_statistics`."""
     empty = np.empty(0)
     data = _Data(rows, time_us, station, pl, error, signed, empty.astype(np.intp), empty)
     chosen = np.arange(rows.size)
     return _band_statistics(
-        data, chosen, axis, target, width, n_candidates, min_samples, risk=risk, core=core
+        data, chosen, axis, target, width, n_candidates, min_samples, risk=risk, core=core, deferred=deferred
     )
 
 
@@ -602,7 +605,11 @@ def _band_statistics(
     *,
     risk: float,
     core: float,
-) -> tuple[ConfidenceBin, BandSamples]:
+    deferred: bool = False,
+) -> tuple[ConfidenceBin, BandSamples] | tuple[ConfidenceBin, BandSamples, BandSolve | None]:
+    """Step 6 of a band: its statistics from the samples ``chosen``. ``deferred``: without its three
+    solves (confidence level, PL1, PL99), returned as a :class:`BandSolve` (``None`` when the band
+    has none) for :func:`solve_band` elsewhere (a campaign's workers) and :func:`with_solves`."""
     n = int(chosen.size)
     pls = data.pl[chosen]
     error = data.error[chosen]
@@ -610,17 +617,18 @@ def _band_statistics(
     nan = math.nan
     mean = sigma = sigma_inflated = confidence = pl_ideal = pl_1 = pl_99 = nan
     inflations: tuple[SigmaInflation, ...] = ()
+    request = None
     if n >= MIN_COMPUTABLE and all(np.ptp(s) > 0 for s in signed):
         inflations = tuple(sigma_inflation(s, core=core) for s in signed)
         mean = float(np.hypot(*[f.mean for f in inflations])) if axis == "horizontal" else inflations[0].mean
         sigma = max(f.sigma for f in inflations)
         sigma_inflated = max(f.sigma_inflated for f in inflations)
-        model = {"mean": mean, "sigma": sigma_inflated, "risk": risk, "axis": axis}
-        pl_ideal = float(ideal_pl(**model))
+        pl_ideal = float(ideal_pl(mean=mean, sigma=sigma_inflated, risk=risk, axis=axis))
         if n >= min_samples:
-            confidence = float(confidence_level(pls, n=n, **model))
-            pl_1 = float(pl_at_confidence(0.01, n=n, **model))
-            pl_99 = float(pl_at_confidence(0.99, n=n, **model))
+            request = BandSolve(pls, n, mean, sigma_inflated, risk, axis)
+            if not deferred:
+                confidence, pl_1, pl_99 = solve_band(request)
+                request = None
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = error / pls
     bin_ = ConfidenceBin(
@@ -653,4 +661,35 @@ def _band_statistics(
         signed=signed,
         inflations=inflations,
     )
-    return bin_, band
+    return (bin_, band, request) if deferred else (bin_, band)
+
+
+@dataclass(frozen=True)
+class BandSolve:
+    """The inputs of a rated band's three solves (:func:`solve_band`): its samples' PLs, their
+    number, and the error model (mean, inflated sigma) at the risk per sample."""
+
+    pls: np.ndarray
+    n: int
+    mean: float
+    sigma: float
+    risk: float
+    axis: str
+
+
+def solve_band(s: BandSolve) -> tuple[float, float, float]:
+    """The confidence level of the band's PLs (eq. 34), and PL1 and PL99 (section III.3)."""
+    model = {"mean": s.mean, "sigma": s.sigma, "risk": s.risk, "axis": s.axis, "n": s.n}
+    return (
+        float(confidence_level(s.pls, **model)),
+        float(pl_at_confidence(0.01, **model)),
+        float(pl_at_confidence(0.99, **model)),
+    )
+
+
+def with_solves(bin_: ConfidenceBin, solved: tuple[float, float, float]) -> ConfidenceBin:
+    """A deferred bin with its :func:`solve_band` results."""
+    confidence, pl_1, pl_99 = solved
+    return dataclasses.replace(
+        bin_, confidence=confidence, pl_1=pl_1, pl_99=pl_99, suspect=bool(confidence < SUSPECT_BELOW)
+    )

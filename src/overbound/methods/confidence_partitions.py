@@ -32,7 +32,7 @@ Every partial merges by integer addition, set union or an exact comparison; no f
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -47,8 +47,10 @@ from overbound.methods.confidence_level import (
     band_widths,
     check_columns,
     samples_bin,
+    solve_band,
     target_count,
     validate_parameters,
+    with_solves,
 )
 
 __all__ = [
@@ -568,11 +570,13 @@ def merge_picks(*parts: Picks) -> Picks:
 
 
 def dataset_confidence(
-    plan: BandPlan, chains: BandChains, forward: Picks, backward: Picks
+    plan: BandPlan, chains: BandChains, forward: Picks, backward: Picks, starmap: Callable | None = None
 ) -> ConfidenceAnalysis:
     """The :class:`ConfidenceAnalysis` from the walked chains: per target the first width walked
     whose chain reaches ``min_samples``, else the last (step 5); its samples in time order (the
-    backward walk reversed, then the forward), its statistics (step 6)."""
+    backward walk reversed, then the forward), its statistics (step 6). ``starmap(fn, items)``
+    (a campaign runner's): the rated bands' solves (:func:`solve_band`, most of step 6's time)
+    through it, the same numbers as in this process."""
     p = plan.parameters
     both = merge_picks(_reverse(backward), forward)
     order = np.argsort(both.chain, kind="stable")  # each chain's samples in time order
@@ -580,7 +584,7 @@ def dataset_confidence(
     walked: dict[tuple[int, int], np.ndarray] = {}
     for i, c in enumerate(chains.chains):
         walked[c.k, c.j] = order[bounds[i] : bounds[i + 1]]
-    bins, samples = [], []
+    bins, samples, requests = [], [], []
     last = plan.widths.size - 1
     for k, target in enumerate(plan.targets.tolist()):
         j = next(
@@ -589,7 +593,7 @@ def dataset_confidence(
         )
         idx = walked.get((k, j), np.empty(0, dtype=np.intp))
         chosen = take(both.samples, idx)
-        bin_, band = samples_bin(
+        bin_, band, request = samples_bin(
             chosen.t,
             chosen.row,
             chosen.station,
@@ -603,9 +607,15 @@ def dataset_confidence(
             min_samples=p.min_samples,
             risk=p.risk,
             core=p.core,
+            deferred=True,
         )
         bins.append(bin_)
         samples.append(band)
+        requests.append(request)
+    rated = [i for i, r in enumerate(requests) if r is not None]
+    solved = (starmap or _starmap)(solve_band, [(requests[i],) for i in rated])
+    for i, s in zip(rated, solved, strict=True):
+        bins[i] = with_solves(bins[i], s)
     return ConfidenceAnalysis(
         axis=plan.axis,
         risk=float(p.risk),
@@ -624,6 +634,10 @@ def dataset_confidence(
     )
 
 
+def _starmap(fn: Callable, items: list[tuple]) -> list:
+    return [fn(*item) for item in items]
+
+
 def _reverse(p: Picks) -> Picks:
     r = slice(None, None, -1)
     return Picks(p.chain[r], take(p.samples, r))
@@ -638,11 +652,15 @@ def walk(plan: BandPlan, chains: BandChains, days: Iterable[BandBlock], forward:
 
 
 def table_confidence(
-    table: pl.DataFrame, axis: str = "vertical", parameters: ConfidenceParameters | None = None
+    table: pl.DataFrame,
+    axis: str = "vertical",
+    parameters: ConfidenceParameters | None = None,
+    starmap: Callable | None = None,
 ) -> ConfidenceAnalysis:
     """:func:`~overbound.methods.confidence_level.confidence_analysis` of an epoch table (all
     stations, ``parameters`` or its defaults) by the passes of a dataset over its station-days
-    (stations in order of first appearance, days in order): equal to it to the last bit."""
+    (stations in order of first appearance, days in order): equal to it to the last bit.
+    ``starmap``: as :func:`dataset_confidence`."""
     parameters = parameters or ConfidenceParameters()
     parameters.check(axis)
     stations = table["station"].cast(pl.String)
@@ -664,5 +682,5 @@ def table_confidence(
         by_day.setdefault(d, []).append(b)
     days = [day_block(by_day[d]) for d in sorted(by_day)]
     return dataset_confidence(
-        plan, chains, walk(plan, chains, days, True), walk(plan, chains, days[::-1], False)
+        plan, chains, walk(plan, chains, days, True), walk(plan, chains, days[::-1], False), starmap
     )
