@@ -1129,7 +1129,16 @@ _FILES = click.Path(dir_okay=False, path_type=Path)
     default=None,
     help="GEO PRN whose messages are used (default: the one received at each epoch).",
 )
-@click.option("--station", help="Station name (default: RINEX marker name or file name).")
+@click.option(
+    "--station",
+    "stations",
+    cls=_ManyOption,
+    multiple=True,
+    metavar="NAME...",
+    help="Station name: one for all --obs files (one receiver), or one per --obs file in their order. "
+    "Default: files are told apart by RINEX marker name and header position (within 100 m), each "
+    "station named by its marker or first file; u-blox logs, which carry neither, are one station.",
+)
 @click.option(
     "--all-subsets",
     "all_subsets",
@@ -1172,16 +1181,20 @@ def sbas(
     mode,
     mask_deg,
     geo,
-    station,
+    stations,
     all_subsets,
     services,
     sp3,
     out,
 ) -> None:
-    """DO-229 SBAS engine: errors and protection levels from raw observations and SBAS messages."""
+    """DO-229 SBAS engine: errors and protection levels from raw observations and SBAS messages.
+
+    Observation files of several receivers are processed station by station, never merged, into
+    one epoch table with a row per station and epoch (e.g. --obs TLSE0140.19o BRUX0140.19o).
+    """
     from overbound._allocator import keep_freed_memory
     from overbound.sbas.engine import SbasOptions
-    from overbound.sbas.run import process, write_run
+    from overbound.sbas.run import process_stations, write_runs
     from overbound.services import resolve_services
 
     if all_subsets or sp3:  # imported only when asked for: the Stanford counts pull in scipy (0.3-1 s)
@@ -1198,20 +1211,27 @@ def sbas(
         def step(what: str) -> None:
             bar.update(task, description=what)
 
-        run = process(list(obs), list(nav), list(sbas_files), reference=ref, station=station, options=options,
-                      progress=step)  # fmt: skip
+        runs = process_stations(list(obs), list(nav), list(sbas_files), reference=ref,
+                                stations=list(stations) or None, options=options, progress=step)  # fmt: skip
+        if len(runs) > 1 and (all_subsets or sp3):
+            raise click.UsageError(
+                f"--all-subsets and --sp3 take one station; the --obs files hold {len(runs)} "
+                f"({', '.join(r.station for r in runs)}): run them one station at a time"
+            )
+        run = runs[0]
         # products before any writing: a bad SP3 file leaves no half-written output
         subsets = subsets_product(run, levels, progress=step) if all_subsets else None
         ranges = range_product(run, list(sp3), progress=step) if sp3 else None
         step(f"writing {out}")
-        epochs_path, sats_path = write_run(run, staged)
+        epochs_path, sats_path = write_runs(runs, staged)
         subsets_paths = write_subsets(subsets, run, staged) if subsets else None
         range_path = write_range(ranges, run, staged) if ranges else None
     # the paths where the files are now (renamed out of the staging directory)
     epochs_path, sats_path = out.parent / epochs_path.name, out.parent / sats_path.name
     subsets_paths = tuple(out.parent / p.name for p in subsets_paths) if subsets_paths else None
     range_path = out.parent / range_path.name if range_path else None
-    console.print(_sbas_line(run, epochs_path), highlight=False, soft_wrap=True)
+    for r in runs:
+        console.print(_sbas_line(r, epochs_path, several=len(runs) > 1), highlight=False, soft_wrap=True)
     if subsets_paths:
         console.print(_subsets_line(subsets, subsets_paths[0]), highlight=False, soft_wrap=True)
     if range_path:
@@ -1225,8 +1245,9 @@ def sbas(
         click.echo(f"range: {range_path}")
 
 
-def _sbas_line(run, path: Path) -> str:
-    """One line: epochs and solutions, PL medians, error percentiles, rejections and missing data."""
+def _sbas_line(run, path: Path, several: bool = False) -> str:
+    """One line: epochs and solutions, PL medians, error percentiles, rejections and missing data
+    (``several``: of one station among several in the file)."""
     import numpy as np
 
     e = run.epochs
@@ -1242,7 +1263,8 @@ def _sbas_line(run, path: Path) -> str:
     prns = c["missing_ephemeris_prns"]
     geos = ", ".join(str(g) for g in sorted(set(e["geo"].to_list())))
     return (
-        f"{path}: {e.height} epochs, {sol.height} with a {run.options.mode} solution (GEO {geos}); "
+        f"{path}{' station ' + run.station if several else ''}: "
+        f"{e.height} epochs, {sol.height} with a {run.options.mode} solution (GEO {geos}); "
         f"HPL/VPL median {pct(sol['hpl'], 50)}/{pct(sol['vpl'], 50)} m; "
         f"HPE95 {pct(sol['hpe'], 95)} m, |VPE|95 {pct(sol['vpe'], 95)} m "
         f"(reference: {run.reference_source}); messages {msgs['messages']}, bad CRC {c['bad_crc']}; "

@@ -316,7 +316,8 @@ def write_epochs(
         "report": report.to_dict() if report else None,
         "extra": extra_metadata or {},
     }
-    table.write_parquet(path, compression=compression, metadata={METADATA_KEY: json.dumps(meta, sort_keys=True)})
+    metadata = {METADATA_KEY: json.dumps(meta, sort_keys=True)}
+    table.write_parquet(path, compression=compression, metadata=metadata)
     return path
 
 

@@ -8,6 +8,15 @@ position and the GEO, runs the engine and gathers every count of what was reject
 :func:`write_run` writes the epoch table (:func:`overbound.io.table.write_epochs`, so ``overbound
 analyze`` reads it) and the per-satellite table next to it (``NAME.sats.parquet``).
 
+Several receivers
+-----------------
+:func:`process_stations` processes the observation files station by station, never merged
+(:func:`read_stations`, :func:`station_names`): files are one station when their RINEX marker
+names agree and their header positions are within :data:`SAME_STATION_M`; the navigation and
+SBAS message files serve every station. Each station's run equals :func:`process` of its files
+alone; :func:`write_runs` writes them as one epoch table. Records of one time and satellite in two
+files of one station are the only duplicates (dropped and counted).
+
 Reference position
 ------------------
 The engine linearises about the reference and reports errors against it. It is, in order: the
@@ -32,6 +41,7 @@ again). The ``geo`` column of both tables says which GEO served each epoch.
 from __future__ import annotations
 
 import io
+import math
 import re
 from collections import Counter
 from collections.abc import Callable, Sequence
@@ -63,7 +73,20 @@ from overbound.sbas.engine import SbasOptions, SbasResult, run_sbas
 from overbound.sbas.frames import SbasFrames
 from overbound.sbas.messages import decode
 
-__all__ = ["GEO_SWITCH_S", "SbasInputs", "SbasRun", "process", "read_inputs", "satellites_path", "write_run"]
+__all__ = [
+    "GEO_SWITCH_S",
+    "SAME_STATION_M",
+    "SbasInputs",
+    "SbasRun",
+    "process",
+    "process_stations",
+    "read_inputs",
+    "read_stations",
+    "satellites_path",
+    "station_names",
+    "write_run",
+    "write_runs",
+]
 
 #: A tracked GEO is left when its last message is older than this (s).
 GEO_SWITCH_S = 12.0
@@ -163,9 +186,51 @@ def process(
         Unreadable or unknown files, no pseudoranges, no ephemeris covering the observations, no
         SBAS message over them, no reference position.
     """
+    inp = read_inputs(obs, nav, sbas, station=station, progress=progress)
+    return _process(inp, reference, options or SbasOptions(), progress or (lambda _: None))
+
+
+def process_stations(
+    obs: Source | Sequence[Source],
+    nav: Source | Sequence[Source] = (),
+    sbas: Source | Sequence[Source] = (),
+    *,
+    reference: Reference | tuple[float, float, float] | str | None = None,
+    stations: str | Sequence[str] | None = None,
+    options: SbasOptions | None = None,
+    progress: Progress | None = None,
+) -> tuple[SbasRun, ...]:
+    """:func:`process` of each station of the observation files (:func:`read_stations`), in the
+    order of their names: each run equals :func:`process` of that station's files alone.
+
+    ``reference``: ``None`` (each station's RINEX header position) or ``"mean"`` (each its own
+    mean); a position names one antenna, so with several stations it is refused.
+
+    Raises
+    ------
+    ValueError
+        A position given for several stations; station names not one per file.
+    InputError
+        As :func:`process`, for any station (named in the message).
+    """
     step = progress or (lambda _: None)
+    found = read_stations(obs, nav, sbas, stations=stations, progress=step)
+    if len(found) > 1 and reference is not None and not (isinstance(reference, str) and reference == "mean"):
+        names = ", ".join(i.station for i in found)
+        raise ValueError(
+            f"one reference position for {len(found)} stations ({names}): each takes its RINEX header "
+            "position, or give reference 'mean', or process the stations one at a time"
+        )
     opt = options or SbasOptions()
-    inp = read_inputs(obs, nav, sbas, station=station, progress=step)
+    runs = []
+    for inp in found:
+        where = f"{inp.station}: " if len(found) > 1 else ""
+        runs.append(_process(inp, reference, opt, lambda what, where=where: step(where + what)))
+    return tuple(runs)
+
+
+def _process(inp: SbasInputs, reference, opt: SbasOptions, step: Progress) -> SbasRun:
+    """The checks, the reference and the engine runs of one station's inputs."""
     counts = _check(inp)
     msgs = decode(inp.frames)
     counts["messages"] = msgs.counts
@@ -220,6 +285,133 @@ def _read_role(files, role: str, from_ubx, readers: dict, from_others, reports: 
     return out
 
 
+#: Header positions of two observation files farther apart than this (m) are two receivers.
+SAME_STATION_M = 100.0
+
+
+@dataclass(frozen=True, slots=True, eq=False)
+class _ObsFile:
+    """One observation file as read: its table, report, identity (RINEX marker name and header
+    position; neither for a u-blox log) and, for a u-blox log, its ephemerides and SBAS frames."""
+
+    name: str
+    table: pl.DataFrame
+    report: ReadReport
+    marker: str = ""
+    position: tuple[float, float, float] | None = None
+    eph: pl.DataFrame | None = None
+    frames: SbasFrames | None = None
+
+
+def _read_observations(obs: Source | Sequence[Source]) -> list[_ObsFile]:
+    files = []
+    for name, kind, data in _load(obs, "obs"):
+        if kind == "ubx":
+            raw, rep = read_ubx_raw(_stream(data, name))
+            files.append(_ObsFile(name, raw.obs, rep, eph=raw.eph, frames=raw.frames))
+        else:
+            # the engine uses the L1 C/A code only (no SNR mask, no carrier smoothing: plain DO-229)
+            o, rep = read_rinex_obs(_stream(data, name), codes=("C1C",))
+            table = o.table.select(c for c in o.table.columns if not c.endswith(("_lli", "_ssi")))
+            files.append(_ObsFile(name, table, rep, o.header.marker_name.strip(), o.header.approx_position))
+    return files
+
+
+def _stem(name: str) -> str:
+    return Path(name).name.split(".")[0]
+
+
+def station_names(files: Sequence[tuple[str, str, tuple[float, float, float] | None]]) -> list[str]:
+    """The station of each observation file ``(name, marker, header position)``, in order.
+
+    Files are one station when their RINEX marker names are equal and their header positions are
+    within :data:`SAME_STATION_M` (a missing position agrees with any): several files of a day of
+    one receiver. A station is named by its marker, else by its first file's name up to the first
+    dot; two stations of one marker at different positions are told apart by that name
+    (``MARKER-file``). A u-blox log carries neither identity: all logs, and RINEX files without a
+    marker or position, are one station unless the caller names each file's station.
+    """
+    groups: list[tuple[str, tuple[float, float, float] | None, str]] = []
+    out = []
+    for name, marker, position in files:
+        match = next((g for g in groups if g[0] == marker and _near(g[1], position)), None)
+        if match is None:
+            label = marker or _stem(name)
+            if any(g[2] == label for g in groups):
+                label = f"{marker}-{_stem(name)}" if marker else f"{label}-{len(groups) + 1}"
+            match = (marker, position, label)
+            groups.append(match)
+        elif match[1] is None and position is not None:  # the group's position, once known
+            groups[groups.index(match)] = match = (marker, position, match[2])
+        out.append(match[2])
+    return out
+
+
+def _near(a: tuple[float, float, float] | None, b: tuple[float, float, float] | None) -> bool:
+    return a is None or b is None or math.dist(a, b) <= SAME_STATION_M
+
+
+def _file_stations(files: list[_ObsFile], stations: str | Sequence[str] | None) -> list[str]:
+    """Each file's station: ``stations`` (one name for all, or one per file), else :func:`station_names`."""
+    if stations is None:
+        return station_names([(f.name, f.marker, f.position) for f in files])
+    if isinstance(stations, str):
+        return [stations] * len(files)
+    if len(stations) == 1:
+        return [stations[0]] * len(files)
+    if len(stations) != len(files):
+        raise ValueError(
+            f"{len(stations)} station names for {len(files)} observation files: give one name for "
+            "all, or one per file in the order of the files"
+        )
+    return list(stations)
+
+
+def read_stations(
+    obs: Source | Sequence[Source],
+    nav: Source | Sequence[Source] = (),
+    sbas: Source | Sequence[Source] = (),
+    *,
+    stations: str | Sequence[str] | None = None,
+    progress: Progress | None = None,
+) -> tuple[SbasInputs, ...]:
+    """Read all input files: one :class:`SbasInputs` per station of the observation files, in the
+    order of their station names (see :func:`station_names`; ``stations``: one name for all
+    files, or one per file). The navigation and SBAS message files are read once and serve every
+    station; without them, the ephemerides of all u-blox logs serve every station (broadcast
+    ephemerides are the same for all), and each station takes the SBAS frames its own logs hold.
+    Observation records of one time and satellite in two files of one station are counted as
+    duplicates, the first read kept; files of two stations are never merged."""
+    step = progress or (lambda _: None)
+    step("reading observations")
+    files = _read_observations(obs)
+    names = _file_stations(files, stations)
+    if not files:  # no observation: one station without any, which the checks refuse
+        files, names = [_ObsFile("obs", pl.DataFrame(), ReadReport("obs", "none"))], ["obs"]
+    reports: list[tuple[str, ReadReport]] = []
+    step("reading ephemerides")
+    ephs = [f.eph for f in files if f.eph is not None] if not nav else []
+    navs = _read_role(nav, "nav", lambda raw: raw.eph, {"rinex-nav": read_rinex_nav}, lambda n: n, reports)
+    headers = [n.header for n in navs if isinstance(n, GpsEphemerides)]
+    ephs += [n.table if isinstance(n, GpsEphemerides) else n for n in navs]
+    klob = next(((h.ion_alpha, h.ion_beta) for h in headers if h.ion_alpha and h.ion_beta), None)
+    eph = pl.concat(ephs, how="diagonal_relaxed") if ephs else pl.DataFrame()
+    if eph.height:
+        eph = eph.unique(("prn", "toc", "iode", "iodc"), keep="first", maintain_order=True)
+    step("reading SBAS messages")
+    sbas_readers = {"ems": read_ems, "rinex-b": read_rinex_b}
+    shared = _read_role(sbas, "sbas", lambda raw: raw.frames, sbas_readers, lambda f: f, reports)
+    out = []
+    for station in sorted(set(names)):
+        mine = [f for f, n in zip(files, names, strict=True) if n == station]
+        obs_table, n_dup = _merge_observations([f.table for f in mine])
+        frames = shared if sbas else [f.frames for f in mine if f.frames is not None]
+        position = next((f.position for f in mine if f.position is not None), None)
+        own = tuple(("obs", f.report) for f in mine) + tuple(reports)
+        out.append(SbasInputs(obs_table, eph, SbasFrames.concat(frames), position, station, own, n_dup, klob))
+    return tuple(out)
+
+
 def read_inputs(
     obs: Source | Sequence[Source],
     nav: Source | Sequence[Source] = (),
@@ -228,46 +420,22 @@ def read_inputs(
     station: str | None = None,
     progress: Progress | None = None,
 ) -> SbasInputs:
-    """Read and merge all input files (see :func:`process`)."""
-    step = progress or (lambda _: None)
-    reports: list[tuple[str, ReadReport]] = []
-    tables, ephs, frames = [], [], []
-    header_pos, marker = None, ""
-    step("reading observations")
-    for name, kind, data in _load(obs, "obs"):
-        if kind == "ubx":
-            raw, rep = read_ubx_raw(_stream(data, name))
-            tables.append(raw.obs)
-            if not nav:
-                ephs.append(raw.eph)
-            if not sbas:
-                frames.append(raw.frames)
-        else:
-            # the engine uses the L1 C/A code only (no SNR mask, no carrier smoothing: plain DO-229)
-            o, rep = read_rinex_obs(_stream(data, name), codes=("C1C",))
-            tables.append(o.table.select(c for c in o.table.columns if not c.endswith(("_lli", "_ssi"))))
-            header_pos = header_pos or o.header.approx_position
-            marker = marker or o.header.marker_name.strip()
-        reports.append(("obs", rep))
-    step("reading ephemerides")
-    nav_readers = {"rinex-nav": read_rinex_nav}
-    navs = _read_role(nav, "nav", lambda raw: raw.eph, nav_readers, lambda n: n, reports)
-    headers = [n.header for n in navs if isinstance(n, GpsEphemerides)]
-    ephs += [n.table if isinstance(n, GpsEphemerides) else n for n in navs]
-    klob = next(((h.ion_alpha, h.ion_beta) for h in headers if h.ion_alpha and h.ion_beta), None)
-    step("reading SBAS messages")
-    sbas_readers = {"ems": read_ems, "rinex-b": read_rinex_b}
-    frames += _read_role(sbas, "sbas", lambda raw: raw.frames, sbas_readers, lambda f: f, reports)
-    obs_table, n_dup = _merge_observations(tables)
-    eph = pl.concat(ephs, how="diagonal_relaxed") if ephs else pl.DataFrame()
-    if eph.height:
-        eph = eph.unique(("prn", "toc", "iode", "iodc"), keep="first", maintain_order=True)
-    first = _names(obs)[0] if _names(obs) else "obs"
-    return SbasInputs(
-        obs=obs_table, eph=eph, frames=SbasFrames.concat(frames), header_position=header_pos,
-        station=station or marker or Path(first).name.split(".")[0], reports=tuple(reports),
-        duplicate_observations=n_dup, klobuchar=klob,
-    )  # fmt: skip
+    """Read and merge all input files of one station (see :func:`process`).
+
+    Raises
+    ------
+    InputError
+        The observation files hold several stations and ``station`` does not name them as one
+        (:func:`read_stations` reads them apart).
+    """
+    found = read_stations(obs, nav, sbas, stations=station, progress=progress)
+    if len(found) > 1:
+        names = ", ".join(i.station for i in found)
+        raise InputError(
+            _names(obs)[0], f"the observation files hold {len(found)} stations ({names}): process them "
+            "apart (read_stations, process_stations) or name them as one station",
+        )  # fmt: skip
+    return found[0]
 
 
 def _merge_observations(tables: list[pl.DataFrame]) -> tuple[pl.DataFrame, int]:
@@ -296,27 +464,54 @@ def satellites_path(path: str | Path) -> Path:
 
 def write_run(run: SbasRun, path: str | Path) -> tuple[Path, Path]:
     """Write the epoch table (with the run's provenance) and the per-satellite table next to it."""
+    return write_runs((run,), path)
+
+
+def write_runs(runs: Sequence[SbasRun], path: str | Path) -> tuple[Path, Path]:
+    """Write the epoch tables of the runs (one per station, :func:`process_stations`) as one, with
+    their provenance, and their per-satellite tables next to it. Of one run, the tables as they
+    are, its provenance under ``sbas``; of several, the tables one after the other (the satellite
+    table then with a ``station`` column after ``time``), the provenance of each station under
+    ``sbas_stations``."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    rows = sum(r.rows_read for role, r in run.reports if role == "obs")
+    rejected: Counter = Counter()
+    for run in runs:
+        rejected.update(run.counts.get("rejected", {}))
+    bad_crc = sum(run.counts.get("bad_crc", 0) for run in runs)
     report = ReadReport(
-        source=", ".join(r.source for _, r in run.reports),
+        source=", ".join(dict.fromkeys(r.source for run in runs for _, r in run.reports)),
         format="sbas-engine",
-        rows_read=rows,
-        rows_kept=run.epochs.height,
-        rejected=run.counts.get("rejected", {}),
-        invalidated={"bad_crc": run.counts["bad_crc"]} if run.counts.get("bad_crc") else {},
-        notes=(f"reference ({run.reference_source}): {run.reference_ecef}",),
+        rows_read=sum(r.rows_read for run in runs for role, r in run.reports if role == "obs"),
+        rows_kept=sum(run.epochs.height for run in runs),
+        rejected=dict(sorted(rejected.items())),
+        invalidated={"bad_crc": bad_crc} if bad_crc else {},
+        notes=tuple(
+            (f"{run.station} " if len(runs) > 1 else "")
+            + f"reference ({run.reference_source}): {run.reference_ecef}"
+            for run in runs
+        ),
     )
-    write_epochs(run.epochs, path, report=report, extra_metadata=run.metadata())
-    sats = satellites_path(path)
+    if len(runs) == 1:
+        epochs, sats, meta = runs[0].epochs, runs[0].satellites, runs[0].metadata()
+    else:
+        epochs = pl.concat([run.epochs for run in runs], how="vertical_relaxed")
+        sats = pl.concat(
+            [
+                run.satellites.insert_column(1, pl.Series("station", [run.station] * run.satellites.height))
+                for run in runs
+            ]
+        ).with_columns(pl.col("station").cast(pl.Categorical))
+        meta = {"sbas_stations": {run.station: run.metadata()["sbas"] for run in runs}}
+    write_epochs(epochs, path, report=report, extra_metadata=meta)
+    sats_path = satellites_path(path)
     if path.suffix.lower() == ".csv":
-        run.satellites.write_csv(sats)
+        sats.write_csv(sats_path)
     else:
         # zstd level 1: 5 % larger than the default level 3 and a third faster to write (0.32 s against
         # 0.47 s for a day at 1 Hz, 849,360 rows, 85 MB), which is a tenth of the whole command
-        run.satellites.write_parquet(sats, compression="zstd", compression_level=1)
-    return path, sats
+        sats.write_parquet(sats_path, compression="zstd", compression_level=1)
+    return path, sats_path
 
 
 # --------------------------------------------------------------------------- reading
