@@ -7,8 +7,6 @@ from __future__ import annotations
 import json
 import os
 import shutil
-import socket
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -130,41 +128,6 @@ def test_local_cluster_equals_pooled_table(dataset: Path, pooled, tmp_path: Path
     with campaign_client(workers=2) as client:
         result = count_campaign(_copy(dataset, tmp_path), SERVICES, client=client)
     assert_same(result.counting, pooled)
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def _dask_command() -> list[str]:
-    """The ``dask`` command of this environment (its script beside this Python, else on PATH)."""
-    beside = Path(sys.executable).parent / "dask"
-    found = str(beside) if beside.exists() else shutil.which("dask")
-    assert found, "the dask command is installed with dask[distributed]"
-    return [found]
-
-
-@pytest.fixture
-def scheduler():
-    """A real ``dask scheduler`` and two ``dask worker`` processes on localhost."""
-    port = _free_port()
-    address = f"tcp://127.0.0.1:{port}"
-    dask = _dask_command()
-    quiet = {"stdout": subprocess.DEVNULL, "stderr": subprocess.DEVNULL}
-    scheduler_args = ["scheduler", "--host", "127.0.0.1", "--port", str(port), "--dashboard-address", ":0"]
-    procs = [subprocess.Popen([*dask, *scheduler_args], **quiet)]
-    try:
-        for _ in range(2):
-            worker_args = ["worker", address, "--nthreads", "1", "--no-nanny", "--no-dashboard"]
-            procs.append(subprocess.Popen([*dask, *worker_args], **quiet))
-        yield address
-    finally:
-        for p in reversed(procs):  # no nanny: killing a worker leaves no child behind
-            p.kill()
-        for p in procs:
-            p.wait(timeout=30)
 
 
 def test_real_scheduler_and_two_workers(dataset: Path, pooled, tmp_path: Path, scheduler: str) -> None:

@@ -1076,10 +1076,35 @@ _FILES = click.Path(dir_okay=False, path_type=Path)
     "obs",
     cls=_ManyOption,
     multiple=True,
-    required=True,
     type=_FILES,
     metavar="FILE...",
     help="Observations: RINEX 2/3 (plain, gzip, Hatanaka) or a u-blox UBX raw log (RXM-RAW/RAWX).",
+)
+@click.option(
+    "--campaign",
+    "campaign_file",
+    type=click.Path(dir_okay=False, exists=True, path_type=Path),
+    help="A network campaign description (TOML: stations, file patterns with date tokens, days; see "
+    "overbound.sbas_network), run station-day by station-day into --dataset instead of --obs/-o.",
+)
+@click.option(
+    "--dataset",
+    "dataset",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="With --campaign: the campaign dataset each station-day is written into (created if needed).",
+)
+@click.option(
+    "--workers",
+    type=click.IntRange(min=0),
+    metavar="N",
+    help="With --campaign: N local worker processes (0: this process; default: one per core).",
+)
+@click.option(
+    "--scheduler",
+    metavar="ADDRESS",
+    envvar="DASK_SCHEDULER_ADDRESS",
+    help="With --campaign: run on the Dask cluster at ADDRESS (default $DASK_SCHEDULER_ADDRESS); the "
+    "files and the dataset must be at the same paths on its workers.",
 )
 @click.option(
     "--nav",
@@ -1168,12 +1193,15 @@ _FILES = click.Path(dir_okay=False, path_type=Path)
     "-o",
     "--output",
     "out",
-    required=True,
     type=_FILES,
     help="Epoch table (.parquet or .csv); the per-satellite table goes next to it (NAME.sats.parquet).",
 )
 def sbas(
     obs,
+    campaign_file,
+    dataset,
+    workers,
+    scheduler,
     nav,
     sbas_files,
     reference,
@@ -1192,6 +1220,16 @@ def sbas(
     Observation files of several receivers are processed station by station, never merged, into
     one epoch table with a row per station and epoch (e.g. --obs TLSE0140.19o BRUX0140.19o).
     """
+    if campaign_file is not None:
+        if obs or nav or sbas_files or out:
+            raise click.UsageError(
+                "--campaign names its own files: give --dataset, not --obs/--nav/--sbas/-o"
+            )
+        if dataset is None:
+            raise click.UsageError("--campaign needs --dataset DIR")
+        return _sbas_network(campaign_file, dataset, workers, scheduler)
+    if not obs or out is None:
+        raise click.UsageError("give --obs FILE... and -o FILE (or --campaign FILE --dataset DIR)")
     from overbound._allocator import keep_freed_memory
     from overbound.sbas.engine import SbasOptions
     from overbound.sbas.run import process_stations, write_runs
@@ -1243,6 +1281,29 @@ def sbas(
         click.echo(f"subsets figure: {subsets_paths[1]}")
     if range_path:
         click.echo(f"range: {range_path}")
+
+
+def _sbas_network(campaign_file: Path, dataset: Path, workers: int | None, scheduler: str | None) -> None:
+    """``overbound sbas --campaign``: every station-day into the dataset, a line per station."""
+    from overbound.sbas_network import read_campaign, run_network
+
+    campaign = read_campaign(campaign_file)
+    with _campaign_client(dataset, workers, scheduler, lambda: False) as client, _progress() as bar:
+        task = bar.add_task("reading", total=None)
+        outcomes = run_network(
+            campaign, dataset, client=client, progress=lambda d: bar.update(task, description=d)
+        )
+    for s in campaign.stations:
+        mine = [o for o in outcomes if o.station == s.id]
+        written = [o for o in mine if o.status == "written"]
+        line = (
+            f"{dataset} station {s.id}: {len(written)} of {len(mine)} days written, "
+            f"{sum(o.epochs for o in written)} epochs, "
+            f"{sum(o.solutions for o in written)} with a {campaign.options.mode} solution"
+        )
+        others = [f"{o.date} {o.status}: {o.reason}" for o in mine if o.status != "written"]
+        console.print(line + ("; " + "; ".join(others) if others else ""), highlight=False, soft_wrap=True)
+    click.echo(f"dataset: {dataset}")
 
 
 def _sbas_line(run, path: Path, several: bool = False) -> str:

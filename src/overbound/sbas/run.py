@@ -79,9 +79,11 @@ __all__ = [
     "SbasInputs",
     "SbasRun",
     "process",
+    "process_inputs",
     "process_stations",
     "read_inputs",
     "read_stations",
+    "run_report",
     "satellites_path",
     "station_names",
     "write_run",
@@ -187,7 +189,7 @@ def process(
         SBAS message over them, no reference position.
     """
     inp = read_inputs(obs, nav, sbas, station=station, progress=progress)
-    return _process(inp, reference, options or SbasOptions(), progress or (lambda _: None))
+    return process_inputs(inp, reference, options or SbasOptions(), progress or (lambda _: None))
 
 
 def process_stations(
@@ -225,12 +227,13 @@ def process_stations(
     runs = []
     for inp in found:
         where = f"{inp.station}: " if len(found) > 1 else ""
-        runs.append(_process(inp, reference, opt, lambda what, where=where: step(where + what)))
+        runs.append(process_inputs(inp, reference, opt, lambda what, where=where: step(where + what)))
     return tuple(runs)
 
 
-def _process(inp: SbasInputs, reference, opt: SbasOptions, step: Progress) -> SbasRun:
-    """The checks, the reference and the engine runs of one station's inputs."""
+def process_inputs(inp: SbasInputs, reference, opt: SbasOptions, step: Progress = lambda _: None) -> SbasRun:
+    """:func:`process` of inputs already read (one station's, :func:`read_inputs`): the checks, the
+    reference (as in :func:`process`) and the engine runs."""
     counts = _check(inp)
     msgs = decode(inp.frames)
     counts["messages"] = msgs.counts
@@ -462,6 +465,28 @@ def satellites_path(path: str | Path) -> Path:
     return path.with_name(f"{path.stem}.sats{path.suffix}")
 
 
+def run_report(runs: Sequence[SbasRun]) -> ReadReport:
+    """The read report of the epoch table of ``runs``: observation rows read, epochs kept, every
+    rejection and bad CRC summed, each station's reference."""
+    rejected: Counter = Counter()
+    for run in runs:
+        rejected.update(run.counts.get("rejected", {}))
+    bad_crc = sum(run.counts.get("bad_crc", 0) for run in runs)
+    return ReadReport(
+        source=", ".join(dict.fromkeys(r.source for run in runs for _, r in run.reports)),
+        format="sbas-engine",
+        rows_read=sum(r.rows_read for run in runs for role, r in run.reports if role == "obs"),
+        rows_kept=sum(run.epochs.height for run in runs),
+        rejected=dict(sorted(rejected.items())),
+        invalidated={"bad_crc": bad_crc} if bad_crc else {},
+        notes=tuple(
+            (f"{run.station} " if len(runs) > 1 else "")
+            + f"reference ({run.reference_source}): {run.reference_ecef}"
+            for run in runs
+        ),
+    )
+
+
 def write_run(run: SbasRun, path: str | Path) -> tuple[Path, Path]:
     """Write the epoch table (with the run's provenance) and the per-satellite table next to it."""
     return write_runs((run,), path)
@@ -475,23 +500,7 @@ def write_runs(runs: Sequence[SbasRun], path: str | Path) -> tuple[Path, Path]:
     ``sbas_stations``."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    rejected: Counter = Counter()
-    for run in runs:
-        rejected.update(run.counts.get("rejected", {}))
-    bad_crc = sum(run.counts.get("bad_crc", 0) for run in runs)
-    report = ReadReport(
-        source=", ".join(dict.fromkeys(r.source for run in runs for _, r in run.reports)),
-        format="sbas-engine",
-        rows_read=sum(r.rows_read for run in runs for role, r in run.reports if role == "obs"),
-        rows_kept=sum(run.epochs.height for run in runs),
-        rejected=dict(sorted(rejected.items())),
-        invalidated={"bad_crc": bad_crc} if bad_crc else {},
-        notes=tuple(
-            (f"{run.station} " if len(runs) > 1 else "")
-            + f"reference ({run.reference_source}): {run.reference_ecef}"
-            for run in runs
-        ),
-    )
+    report = run_report(runs)
     if len(runs) == 1:
         epochs, sats, meta = runs[0].epochs, runs[0].satellites, runs[0].metadata()
     else:
