@@ -124,6 +124,22 @@ def test_unreadable_partition_is_reported_and_the_rest_goes_on(dataset: Path, tm
     assert_same(result.counting, count_kpis(table, SERVICES))
 
 
+def test_a_partition_without_a_required_column_is_reported_with_the_reader_reason(
+    dataset: Path, tmp_path: Path
+) -> None:
+    """A partition that is Parquet but not an epoch table goes through the epoch reader, whose
+    one-line reason is the failure's (an InputError once crashed the run instead)."""
+    import polars as pl
+
+    ds = _copy(dataset, tmp_path)
+    bad = partitions(ds)[3]
+    pl.read_parquet(bad.path).drop("vpl").write_parquet(bad.path)
+    result = count_campaign(ds, SERVICES, cache=False)
+    (failure,) = result.failures
+    assert failure.key == bad.key
+    assert "vpl" in failure.reason and str(bad.path) not in failure.reason
+
+
 def test_local_cluster_equals_pooled_table(dataset: Path, pooled, tmp_path: Path) -> None:
     with campaign_client(workers=2) as client:
         result = count_campaign(_copy(dataset, tmp_path), SERVICES, client=client)

@@ -22,7 +22,7 @@ from overbound.io.dataset import partition_path, partitions, read_manifest
 from overbound.io.schema import InputError
 from overbound.sbas.engine import SbasOptions
 from overbound.sbas.run import process, process_inputs, read_inputs, write_run
-from overbound.sbas_network import SATELLITES, expand, period_inputs, read_campaign, run_network
+from overbound.sbas_network import expand, period_inputs, read_campaign, run_network, satellites_root
 
 FIX = Path(__file__).resolve().parent / "data" / "sbas" / "engine"
 DAY = dt.date(2019, 1, 14)
@@ -71,7 +71,7 @@ def _assert_partitions_equal_single_runs(folder: Path, dataset: Path, tmp_path: 
         written = pl.read_parquet(partition_path(dataset, s.id, DAY))
         alone = pl.read_parquet(write_run(run, tmp_path / f"{s.id}.parquet")[0])
         assert written.equals(alone)
-        assert pl.read_parquet(partition_path(dataset, s.id, DAY).parent / SATELLITES).equals(run.satellites)
+        assert pl.read_parquet(partition_path(satellites_root(dataset), s.id, DAY)).equals(run.satellites)
 
 
 def test_each_station_day_equals_the_station_processed_alone(folder: Path, tmp_path: Path) -> None:
@@ -88,6 +88,7 @@ def test_each_station_day_equals_the_station_processed_alone(folder: Path, tmp_p
         "station=SYNT/date=2019-01-14",
     ]
     _assert_partitions_equal_single_runs(folder, dataset, tmp_path)
+    assert pl.scan_parquet(dataset / "**" / "*.parquet", hive_partitioning=True).collect().height == 640
     synt = outcomes[1]
     assert synt.epochs == 320 and synt.solutions == 308
     assert synt.counts["reasons"] == _alone(folder, "SYNT").counts["engine"]["reasons"]
@@ -109,21 +110,21 @@ def test_a_period_processed_warm_equals_one_continuous_run() -> None:
         FIX / "SYNT0140_1930-2210.19o.gz", FIX / "brdc0140.19n.gz", FIX / "ems_1930-2210.ems.gz"
     )
     options = SbasOptions()
-    whole = process_inputs(inp, None, options, lambda _: None)
+    whole = process_inputs(inp, None, options)
     split = int(np.datetime64("2019-01-14T21:00:00", "us").astype(np.int64))
     end = split + 86_400_000_000
 
     def after(table: pl.DataFrame) -> pl.DataFrame:
         return table.filter(pl.col("time") >= dt.datetime(2019, 1, 14, 21))
 
-    warm = process_inputs(period_inputs(inp, split, end, 1200.0), None, options, lambda _: None)
+    warm = process_inputs(period_inputs(inp, split, end, 1200.0), None, options)
     assert warm.epochs.equals(after(whole.epochs))
     assert warm.satellites.equals(after(whole.satellites))
-    cold = process_inputs(period_inputs(inp, split, end, 0.0), None, options, lambda _: None)
+    cold = process_inputs(period_inputs(inp, split, end, 0.0), None, options)
     assert cold.epochs.height == warm.epochs.height
     lost = (cold.epochs["vpl"].is_finite() != warm.epochs["vpl"].is_finite()).sum()
     assert lost > 0, "a cold start loses solutions, which the warm start keeps"
-    before = process_inputs(period_inputs(inp, 0, split, 0.0), None, options, lambda _: None)
+    before = process_inputs(period_inputs(inp, 0, split, 0.0), None, options)
     assert pl.concat([before.epochs, warm.epochs]).equals(whole.epochs)
 
 
@@ -150,6 +151,17 @@ def test_a_station_day_that_fails_is_reported_and_the_rest_goes_on(folder: Path,
     assert [o.status for o in outcomes] == ["written", "written", "failed"]
     assert "unknown format for --obs" in outcomes[2].reason
     assert [p.station for p in partitions(tmp_path / "net")] == ["SYNB", "SYNT"]
+    # run again with Toulouse's file gone: its earlier partition is removed, not left behind
+    (folder / "obs" / "SYNT0140.19o.gz").unlink()
+    again = run_network(read_campaign(folder / "campaign.toml"), tmp_path / "net")
+    assert [(o.status, o.replaced) for o in again] == [
+        ("no observations", True),
+        ("written", True),
+        ("failed", False),
+    ]
+    assert [p.station for p in partitions(tmp_path / "net")] == ["SYNB"]
+    assert not partition_path(satellites_root(tmp_path / "net"), "SYNT", DAY).exists()
+    assert len(read_manifest(tmp_path / "net")["sbas_network"]) == 2
 
 
 def test_the_command_line_and_the_analysis_per_station(folder: Path, tmp_path: Path) -> None:
@@ -175,6 +187,15 @@ def test_the_command_line_and_the_analysis_per_station(folder: Path, tmp_path: P
         main, ["sbas", "--campaign", str(folder / "campaign.toml"), "--obs", str(FIX / "brdc0140.19n.gz")]
     )
     assert res.exit_code == 2 and "--campaign names its own files" in res.output
+    res = r.invoke(
+        main, ["sbas", "--campaign", str(folder / "campaign.toml"), "--dataset", "d", "--mode", "NPA"]
+    )
+    assert res.exit_code == 2 and "--mode with --campaign" in res.output
+    res = r.invoke(main, ["sbas", "--obs", str(FIX / "brdc0140.19n.gz"), "-o", "x.parquet", "--workers", "2"])
+    assert res.exit_code == 2 and "--workers: with --campaign only" in res.output
+
+
+_ONE = '[[stations]]\nid = "A"\nobs = ["a"]\n'
 
 
 def test_patterns_and_errors(folder: Path, tmp_path: Path) -> None:
@@ -193,6 +214,12 @@ def test_patterns_and_errors(folder: Path, tmp_path: Path) -> None:
             "is before start",
         ),
         ("start = [", "not TOML"),
+        ('start = "2019-01-14"\n[stations]\nid = "A"\n', "stations: a list of tables"),
+        ('start = "2019-01-14"\ngeo = "120"\n' + _ONE, "geo '120': a GEO PRN"),
+        ('start = "2019-01-14"\nmask = 95\n' + _ONE, "mask 95: degrees"),
+        ("start = 2019-01-14T12:00:00\n" + _ONE, "a GPS day (YYYY-MM-DD), without a time"),
+        ('start = "2019-01-14"\n[[stations]]\nid = "A/B"\nobs = ["a"]\n', "a partition's folder name"),
+        ('start = "2019-01-14"\nsbas = ["{month}/*.ems"]\n' + _ONE, "unknown token 'month'"),
     ):
         bad.write_text(text)
         with pytest.raises(InputError, match=re.escape(message)) as err:

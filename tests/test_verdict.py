@@ -204,3 +204,23 @@ def test_several_stations_get_their_own_verdicts():
     doc = summary_dict(a, assessment=result)
     assert set(doc["verdicts_by_station"]) == {"A", "B"}
     assert doc["verdicts_by_station"]["B"]["LPV-200"]["integrity"]["verdict"] == "fail"
+
+
+def test_r8_at_the_analysis_own_risk_is_the_band_confidence_already_computed() -> None:
+    """R8 re-evaluates each rated band at each service's risk per sample; at the confidence
+    analysis' own risk (1e-7, NPA's) it takes the band's confidence level, which is the same call:
+    equal to the last bit, and not evaluated again."""
+    import overbound.verdict as verdict
+    from overbound.methods.confidence_level import confidence_analysis
+
+    sim = simulate(SimulationConfig(days=2, seed=1, tail_fraction=0.0))
+    cl = confidence_analysis(sim.table, axis="horizontal", min_samples=60, max_pl=25.0)
+    rated = [(b, s) for b, s in zip(cl.bins, cl.samples, strict=True) if b.sufficient]
+    assert len(rated) > 3
+    for b, s in rated:
+        assert verdict.band_confidence(s.pl, b.mean, b.sigma_inflated, b.n, cl.risk, cl.axis) == b.confidence
+    npa = resolve_services(["NPA"])
+    assert cl.risk == npa[0].integrity_risk
+    assert verdict.band_confidence_inputs([cl], npa) == {}  # nothing left to evaluate at NPA's risk
+    lpv = verdict.band_confidence_inputs([cl], resolve_services(["LPV"]))
+    assert lpv and all(k[3] == 2e-7 for k in lpv)

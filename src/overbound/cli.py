@@ -1220,6 +1220,7 @@ def sbas(
     Observation files of several receivers are processed station by station, never merged, into
     one epoch table with a row per station and epoch (e.g. --obs TLSE0140.19o BRUX0140.19o).
     """
+    given = _given_options(click.get_current_context())
     if campaign_file is not None:
         if obs or nav or sbas_files or out:
             raise click.UsageError(
@@ -1227,7 +1228,15 @@ def sbas(
             )
         if dataset is None:
             raise click.UsageError("--campaign needs --dataset DIR")
+        if given & _NOT_WITH_CAMPAIGN:
+            raise click.UsageError(
+                f"{', '.join(sorted(given & _NOT_WITH_CAMPAIGN))} with --campaign: its description sets "
+                "the mode, mask, GEO and each station's reference; --all-subsets, --sp3 and --service "
+                "take one station"
+            )
         return _sbas_network(campaign_file, dataset, workers, scheduler)
+    if given & _CAMPAIGN_ONLY:
+        raise click.UsageError(f"{', '.join(sorted(given & _CAMPAIGN_ONLY))}: with --campaign only")
     if not obs or out is None:
         raise click.UsageError("give --obs FILE... and -o FILE (or --campaign FILE --dataset DIR)")
     from overbound._allocator import keep_freed_memory
@@ -1281,6 +1290,25 @@ def sbas(
         click.echo(f"subsets figure: {subsets_paths[1]}")
     if range_path:
         click.echo(f"range: {range_path}")
+
+
+#: ``overbound sbas`` options that a campaign description replaces, and those of a campaign only.
+_NOT_WITH_CAMPAIGN = frozenset(
+    {"--mode", "--mask", "--geo", "--reference", "--reference-ecef", "--station", "--all-subsets", "--sp3",
+     "--service"}
+)  # fmt: skip
+_CAMPAIGN_ONLY = frozenset({"--dataset", "--workers", "--scheduler"})
+
+
+def _given_options(ctx: click.Context) -> set[str]:
+    """The long names of the options given on the command line (not defaults or the environment)."""
+    from click.core import ParameterSource
+
+    return {
+        max(p.opts, key=len)
+        for p in ctx.command.params
+        if isinstance(p, click.Option) and ctx.get_parameter_source(p.name) == ParameterSource.COMMANDLINE
+    }
 
 
 def _sbas_network(campaign_file: Path, dataset: Path, workers: int | None, scheduler: str | None) -> None:

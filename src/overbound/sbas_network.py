@@ -3,12 +3,12 @@
 A campaign description (TOML) names the stations, their observation files, the navigation and SBAS
 message files (patterns with date tokens) and the GPS days. Each station-day is one task on the
 campaign runner (:mod:`overbound.campaign`: this process or Dask workers): its observations of the
-day go through the DO-229 engine (:func:`overbound.sbas.run.process` of that station), and its
-epoch table is written as the dataset's partition (``station=ID/date=YYYY-MM-DD/part-0.parquet``,
-which ``overbound analyze DATASET`` reads) with its satellite table beside it
-(``satellites.parquet``). The outcome of every station-day (epochs, PA solutions, the engine's
-reasons, every count of what was rejected, or why it failed) goes into the manifest under
-``sbas_network``.
+day go through the DO-229 engine (:func:`overbound.sbas.run.process_inputs` of that station), and
+its epoch table is written as the dataset's partition (``station=ID/date=YYYY-MM-DD/part-0.parquet``,
+which ``overbound analyze DATASET`` reads), its satellite table in the same layout under
+``DATASET.satellites`` beside the dataset (:func:`satellites_root`). The outcome of every
+station-day (epochs, solutions, the engine's reasons, every count of what was rejected, or why it
+failed) goes into the manifest under ``sbas_network``.
 
 Warm days
 ---------
@@ -19,7 +19,12 @@ the longest DO-229 time-out being 20 minutes) before its midnight: the engine's 
 epoch is then the one a continuous run would have (its corrections depend only on the messages
 received before each epoch). ``tests/test_sbas_network.py`` shows a period processed after a
 split, warm, equals the same epochs of one continuous run, both tables to the last bit; cold, it
-does not.
+does not. The navigation files of the next day are read too (an ephemeris of 00:00 is broadcast
+from about 22:00). Two limits: with several GEOs and no ``geo`` option, a day chooses its GEO at
+its first epoch as a receiver switched on then would (the GEO with the latest message), where a
+continuous run keeps the GEO it tracks: give ``geo`` for day-exact results; and a campaign of
+u-blox logs alone (no ``nav``/``sbas`` patterns) starts each day cold, since only the day's own
+logs are read.
 
 Description
 -----------
@@ -49,6 +54,7 @@ import datetime as dt
 import glob
 import math
 import os
+import re
 import tomllib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -72,14 +78,16 @@ __all__ = [
     "process_station_day",
     "read_campaign",
     "run_network",
+    "satellites_root",
 ]
 
-#: Seconds of messages before a day's midnight read first (DO-229's longest time-out, 20 min).
+#: Seconds of messages before a day's midnight read first: the longest time-out of the corrections
+#: in force (DO-229: 20 min); the messages that stay in force longer (masks, MT 27) are rebroadcast
+#: within minutes.
 WARM_S = 1200.0
+_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]*")
 _DAY = dt.timedelta(days=1)
 _GPS_EPOCH = dt.date(1980, 1, 6)
-#: The satellite table of a station-day, beside its partition.
-SATELLITES = "satellites.parquet"
 
 
 @dataclass(frozen=True)
@@ -143,20 +151,34 @@ def read_campaign(path: str | Path) -> NetworkCampaign:
         end = _date(doc, "end") if "end" in doc else start
         if end < start:
             raise ValueError(f"end {end} is before start {start}")
-        options = SbasOptions(
-            mode=str(doc.get("mode", "PA")), mask_deg=float(doc.get("mask", 5.0)), geo=doc.get("geo")
-        )
+        options = SbasOptions(mode=doc.get("mode", "PA"), mask_deg=doc.get("mask", 5.0), geo=doc.get("geo"))
         if options.mode not in ("PA", "NPA"):
             raise ValueError(f"mode {options.mode!r}: PA or NPA")
+        if isinstance(options.mask_deg, bool) or not isinstance(options.mask_deg, int | float):
+            raise ValueError(f"mask {options.mask_deg!r}: degrees, 0 to 90")
+        if not 0 <= options.mask_deg <= 90:
+            raise ValueError(f"mask {options.mask_deg!r}: degrees, 0 to 90")
+        options = dataclasses.replace(options, mask_deg=float(options.mask_deg))
+        if options.geo is not None and (type(options.geo) is not int or not 120 <= options.geo <= 158):
+            raise ValueError(f"geo {options.geo!r}: a GEO PRN, an integer 120 to 158")
         warm = float(doc.get("warm", WARM_S))
         if not (math.isfinite(warm) and warm >= 0):
             raise ValueError(f"warm {warm!r}: seconds >= 0")
-        stations = tuple(_station(i, s) for i, s in enumerate(doc.get("stations") or []))
+        listed = doc.get("stations") or []
+        if not isinstance(listed, list) or not all(isinstance(x, dict) for x in listed):
+            raise ValueError("stations: a list of tables, each [[stations]] with id and obs")
+        stations = tuple(_station(i, x) for i, x in enumerate(listed))
         if not stations:
             raise ValueError("no [[stations]]")
         ids = [s.id for s in stations]
         if len(set(ids)) != len(ids):
             raise ValueError(f"station ids repeated: {ids}")
+        for pattern in (
+            *_patterns(doc, "nav"),
+            *_patterns(doc, "sbas"),
+            *(p for x in stations for p in x.obs),
+        ):
+            _fill(pattern, _tokens(start, "ID"))
         return NetworkCampaign(
             path.resolve().parent,
             start,
@@ -167,14 +189,18 @@ def read_campaign(path: str | Path) -> NetworkCampaign:
             options,
             warm,
         )
-    except (KeyError, TypeError, ValueError) as exc:
-        raise InputError(str(path), str(exc).strip("'\"")) from None
+    except (KeyError, TypeError, ValueError, InputError) as exc:
+        raise InputError(
+            str(path), str(exc.reason if isinstance(exc, InputError) else exc).strip("'\"")
+        ) from None
 
 
 def _date(doc: dict, key: str) -> dt.date:
     if key not in doc:
         raise KeyError(f'{key} missing (a GPS day, e.g. {key} = "2019-01-14")')
     value = doc[key]
+    if isinstance(value, dt.datetime):  # a GPS day: a time of day would move the day's window
+        raise ValueError(f"{key} {value}: a GPS day (YYYY-MM-DD), without a time")
     return value if isinstance(value, dt.date) else dt.date.fromisoformat(str(value))
 
 
@@ -189,6 +215,10 @@ def _patterns(doc: dict, key: str) -> tuple[str, ...]:
 def _station(i: int, s: dict) -> NetworkStation:
     if "id" not in s:
         raise KeyError(f"stations[{i}].id missing")
+    if not isinstance(s["id"], str) or not _ID.fullmatch(s["id"]):
+        raise ValueError(
+            f"stations[{i}].id {s['id']!r}: letters, digits, '.', '_' or '-' (a partition's folder name)"
+        )
     if "reference" in s and "reference_ecef" in s:
         raise ValueError(f"stations[{i}]: reference or reference_ecef, not both")
     ref = None
@@ -206,8 +236,16 @@ def _station(i: int, s: dict) -> NetworkStation:
 
 def expand(root: Path, patterns: Sequence[str], day: dt.date, station: str = "") -> list[Path]:
     """The files of ``patterns`` for ``day`` (tokens filled in, then wildcards), sorted, each once."""
+    tokens = _tokens(day, station)
+    out: dict[Path, None] = {}
+    for p in patterns:
+        out.update(dict.fromkeys(Path(f) for f in sorted(glob.glob(str(root / _fill(p, tokens))))))
+    return list(out)
+
+
+def _tokens(day: dt.date, station: str) -> dict[str, str]:
     week, dow = divmod((day - _GPS_EPOCH).days, 7)
-    tokens = {
+    return {
         "yyyy": f"{day.year:04d}",
         "yy": f"{day.year % 100:02d}",
         "mm": f"{day.month:02d}",
@@ -217,14 +255,15 @@ def expand(root: Path, patterns: Sequence[str], day: dt.date, station: str = "")
         "dow": str(dow),
         "id": station,
     }
-    out: dict[Path, None] = {}
-    for p in patterns:
-        try:
-            filled = p.format(**tokens)
-        except (KeyError, IndexError, ValueError) as exc:
-            raise InputError(p, f"unknown token {exc} in the pattern (tokens: {', '.join(tokens)})") from None
-        out.update(dict.fromkeys(Path(f) for f in sorted(glob.glob(str(root / filled)))))
-    return list(out)
+
+
+def _fill(pattern: str, tokens: dict[str, str]) -> str:
+    try:
+        return pattern.format(**tokens)
+    except (KeyError, IndexError, ValueError) as exc:
+        raise InputError(
+            pattern, f"unknown token {exc} in the pattern (tokens: {', '.join(tokens)})"
+        ) from None
 
 
 def period_inputs(inp: SbasInputs, start_us: int, end_us: int, warm_s: float) -> SbasInputs:
@@ -257,6 +296,7 @@ class DayOutcome:
     observation_epochs_outside_day: int = 0
     counts: dict = field(default_factory=dict)
     reference_ecef: tuple[float, float, float] | None = None
+    replaced: bool = False
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -266,58 +306,93 @@ def process_station_day(
     campaign: NetworkCampaign, station: NetworkStation, day: dt.date, dataset: Path
 ) -> DayOutcome:
     """One task: the station's epochs of ``day`` (warm, see the module notes) written into the
-    dataset; every failure is the outcome's reason, never raised."""
-    from overbound.io.dataset import write_partition
+    dataset, its satellite table into :func:`satellites_root` first; a station-day without
+    epochs or that fails removes the partition an earlier run wrote (``replaced``). Every failure
+    is the outcome's reason (one line, with the exception's type when it is not ours), never raised."""
+    from overbound.io.dataset import partition_path, write_partition
 
-    obs = expand(campaign.root, station.obs, day, station.id)
-    names = tuple(_relative(p, campaign.root) for p in obs)
-    outcome = _outcome_of(station.id, day, names)
-    if not obs:
-        return outcome("no observations", "no observation file")
+    names: tuple[str, ...] = ()
+    here = partition_path(dataset, station.id, day)
+    beside = partition_path(satellites_root(dataset), station.id, day)
+    existed = here.exists()
     try:
-        nav = _two_days(campaign, campaign.nav, day, station.id)
-        sbas = _two_days(campaign, campaign.sbas, day, station.id)
+        obs = expand(campaign.root, station.obs, day, station.id)
+        names = tuple(_relative(p, campaign.root) for p in obs)
+        if not obs:
+            return _gone(
+                here,
+                beside,
+                DayOutcome(station.id, day.isoformat(), "no observations", "no observation file"),
+            )
+        nav = _days_files(
+            campaign, campaign.nav, day, station.id, (-1, 0, 1)
+        )  # an ephemeris of 00:00 next day
+        sbas = _days_files(campaign, campaign.sbas, day, station.id, (-1, 0))
         inp = read_inputs(obs, nav, sbas, station=station.id)
         start = _midnight_us(day)
         warm = period_inputs(inp, start, start + 86_400_000_000, campaign.warm_s)
         outside = inp.obs["time"].n_unique() - warm.obs["time"].n_unique() if inp.obs.height else 0
         if not warm.obs.height:
-            return outcome("no observations", "no observation epoch in the day", outside=outside)
-        run = process_inputs(warm, station.reference, campaign.options, lambda _: None)
-        partition = write_partition(dataset, run.epochs, report=run_report((run,)), extra=run.metadata())
-        _write_beside(partition.path.parent / SATELLITES, run.satellites)
-    except (InputError, OSError, ValueError, ArithmeticError, pl.exceptions.PolarsError) as exc:
-        return outcome("failed", str(exc).splitlines()[0])
+            why = "no observation epoch in the day"
+            outcome = DayOutcome(station.id, day.isoformat(), "no observations", why, names)
+            return _gone(here, beside, dataclasses.replace(outcome, observation_epochs_outside_day=outside))
+        run = process_inputs(warm, station.reference, campaign.options)
+        beside.parent.mkdir(parents=True, exist_ok=True)
+        _write_atomic(beside, run.satellites)  # first: the partition, renamed last, says the day is whole
+        write_partition(dataset, run.epochs, report=run_report((run,)), extra=run.metadata())
+    except Exception as exc:  # a task reports; the other station-days go on
+        reason = str(exc).splitlines()[0] if str(exc) else ""
+        if not isinstance(exc, InputError | OSError | ValueError):
+            reason = f"{type(exc).__name__}: {reason}"
+        return _gone(here, beside, DayOutcome(station.id, day.isoformat(), "failed", reason, names))
     solutions = int(run.epochs["vpl" if campaign.options.mode == "PA" else "hpl"].is_finite().sum())
-    return outcome(
-        "written", epochs=run.epochs.height, solutions=solutions, outside=outside, counts=_counts(run),
-        ref=run.reference_ecef,
+    return DayOutcome(
+        station.id, day.isoformat(), "written", "", names, run.epochs.height, solutions, outside,
+        _counts(run), run.reference_ecef, existed,
     )  # fmt: skip
 
 
-def _outcome_of(station: str, day: dt.date, files: tuple[str, ...]) -> Callable[..., DayOutcome]:
-    def make(
-        status: str, reason: str = "", *, epochs=0, solutions=0, outside=0, counts=None, ref=None
-    ) -> DayOutcome:
-        return DayOutcome(
-            station, day.isoformat(), status, reason, files, epochs, solutions, outside, counts or {}, ref
-        )
+def satellites_root(dataset: str | Path) -> Path:
+    """Where a network run writes each station-day's satellite table (hive layout as the
+    dataset's, ``station=ID/date=YYYY-MM-DD/part-0.parquet``): the folder ``DATASET.satellites``
+    beside the dataset, so that the dataset stays one table for polars, pyarrow and DuckDB."""
+    root = Path(dataset).resolve()
+    return root.with_name(root.name + ".satellites")
 
-    return make
+
+def _gone(here: Path, beside: Path, outcome: DayOutcome) -> DayOutcome:
+    """The outcome of a station-day without epochs, its earlier partition removed (``replaced``)."""
+    existed = here.exists()
+    for path in (here, beside):
+        with contextlib.suppress(FileNotFoundError):
+            path.unlink()
+    return dataclasses.replace(outcome, replaced=existed)
 
 
 def _counts(run: SbasRun) -> dict:
-    """The run's counts as JSON: rejections, duplicates, missing ephemerides, the engine's reasons."""
-    keep = ("rejected", "bad_crc", "missing_ephemeris_rows", "duplicate_observation_rows", "observation_rows")
+    """The run's counts as JSON: the observation files' rejections and duplicates, the engine's
+    reasons; and, apart (``shared_files``), those of the navigation and message files, which every
+    station-day reading them repeats."""
+    rejected = run.counts.get("rejected", {})
+    keep = ("missing_ephemeris_rows", "duplicate_observation_rows", "observation_rows")
     out = {k: run.counts[k] for k in keep if k in run.counts}
+    out["rejected"] = {k: v for k, v in rejected.items() if k.startswith("obs:")}
     out["reasons"] = run.counts.get("engine", {}).get("reasons", {})
+    out["shared_files"] = {
+        "rejected": {k: v for k, v in rejected.items() if not k.startswith("obs:")},
+        "bad_crc": run.counts.get("bad_crc", 0),
+    }
     return out
 
 
-def _two_days(campaign: NetworkCampaign, patterns: Sequence[str], day: dt.date, station: str) -> list[Path]:
-    """The files of the previous day and of ``day`` (each once)."""
-    before = expand(campaign.root, patterns, day - _DAY, station)
-    return list(dict.fromkeys([*before, *expand(campaign.root, patterns, day, station)]))
+def _days_files(
+    campaign: NetworkCampaign, patterns: Sequence[str], day: dt.date, station: str, offsets: Sequence[int]
+) -> list[Path]:
+    """The files of the days ``day + offsets`` (each once, in that order)."""
+    out: dict[Path, None] = {}
+    for k in offsets:
+        out.update(dict.fromkeys(expand(campaign.root, patterns, day + k * _DAY, station)))
+    return list(out)
 
 
 def _midnight_us(day: dt.date) -> int:
@@ -330,7 +405,7 @@ def _relative(p: Path, root: Path) -> str:
     return str(p)
 
 
-def _write_beside(path: Path, table: pl.DataFrame) -> None:
+def _write_atomic(path: Path, table: pl.DataFrame) -> None:
     """Write atomically (temporary file, then rename)."""
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     try:
@@ -355,7 +430,7 @@ def run_network(
     from overbound.io.dataset import create_dataset, read_manifest, write_manifest
     from overbound.output import locked
 
-    root = create_dataset(dataset)
+    root = create_dataset(Path(dataset).resolve())  # the workers may run elsewhere
     runner = _Local() if client is None else _Dask(client)
     items = [(campaign, s, d, root) for s in campaign.stations for d in campaign.days]
     if progress:

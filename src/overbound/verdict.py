@@ -520,9 +520,17 @@ def band_confidence_inputs(confidence, services) -> dict[tuple, tuple]:
         for s in services:
             al = s.alert_limit(cl.axis)
             for b, smp in _rated(cl, al) if al is not None else ():
-                key = (cl.axis, b.target, b.tolerance_used, s.integrity_risk)
-                out.setdefault(key, (smp.pl, b.mean, b.sigma_inflated, b.n, s.integrity_risk, cl.axis))
+                if _own(cl, b, s.integrity_risk) is None:
+                    key = (cl.axis, b.target, b.tolerance_used, s.integrity_risk)
+                    out.setdefault(key, (smp.pl, b.mean, b.sigma_inflated, b.n, s.integrity_risk, cl.axis))
     return out
+
+
+def _own(cl: ConfidenceAnalysis, b, risk: float) -> float | None:
+    """R8 at the analysis' own risk per sample is the band's confidence level, already computed with
+    the same arguments (:func:`~overbound.methods.confidence_level.solve_band`); ``None`` at another
+    risk."""
+    return b.confidence if risk == cl.risk and math.isfinite(b.confidence) else None
 
 
 def _band_items(cl: ConfidenceAnalysis, al: float, risk: float, cache: dict) -> list[EvidenceItem]:
@@ -535,7 +543,9 @@ def _band_items(cl: ConfidenceAnalysis, al: float, risk: float, cache: dict) -> 
     for b, smp in rated:
         key = (cl.axis, b.target, b.tolerance_used, risk)
         if key not in cache:
-            cache[key] = band_confidence(smp.pl, b.mean, b.sigma_inflated, b.n, risk, cl.axis)
+            cache[key] = _own(cl, b, risk)
+            if cache[key] is None:
+                cache[key] = band_confidence(smp.pl, b.mean, b.sigma_inflated, b.n, risk, cl.axis)
         c = cache[key]
         if math.isfinite(c) and (worst is None or c < worst[1]):
             worst = (b, c)

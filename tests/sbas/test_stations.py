@@ -109,6 +109,21 @@ def test_station_names_rules():
     assert station_names([("r1.19o", "", p), ("r2.19o", "", q), ("r3.19o", "", p)]) == ["r1", "r2", "r1"]
     # u-blox logs carry neither: one station, as before
     assert station_names([("h01.ubx", "", None), ("h02.ubx", "", None)]) == ["h01", "h01"]
+    # a u-blox log joins the only station; with several it is its own, whatever the order of the files
+    assert station_names([("t.19o", "SYNT", p), ("x.ubx", "", None)]) == ["SYNT", "SYNT"]
+    files = [("x.ubx", "", None), ("r1.19o", "", p), ("r2.19o", "", q)]
+    assert station_names(files) == ["x", "r1", "r2"]
+    assert station_names(files[::-1]) == ["r2", "r1", "x"]
+    # names stay unique: a marker at three places, and a file named as another station
+    far2 = (p[0] + 10 * SAME_STATION_M, p[1], p[2])
+    assert station_names([("a/X.19o", "M", p), ("b/X.19o", "M", far), ("c/X.19o", "M", far2)]) == [
+        "M",
+        "M-X",
+        "M-X-2",
+    ]
+    assert station_names([("M-X.19o", "", p), ("X.19o", "M", q), ("Y.19o", "M", p)]) == ["M-X", "M", "M-Y"]
+    # a converter's placeholder position (0, 0, 0) is no position
+    assert station_names([("a.19o", "", (0.0, 0.0, 0.0)), ("b.ubx", "", None)]) == ["a", "a"]
 
 
 def test_station_names_given_per_file_or_for_all(tmp_path):
@@ -127,6 +142,8 @@ def test_station_names_given_per_file_or_for_all(tmp_path):
 def test_one_station_api_refuses_several_stations():
     with pytest.raises(InputError, match=r"2 stations \(SYNB, SYNT\)"):
         process([TLSE, BRUX], NAV, EMS)
+    with pytest.raises(InputError, match="no GPS L1 C/A pseudoranges"):
+        process([], NAV, EMS)
 
 
 @pytest.mark.parametrize(

@@ -8,7 +8,8 @@ Layout (hive partitioning, readable by polars, pyarrow, Dask and DuckDB as one t
 
 A partition holds the canonical columns of :mod:`overbound.io.schema` (``station`` included,
 so a file read alone is still a whole epoch table), sorted by time, written by
-:func:`~overbound.io.table.write_epochs` (zstd, provenance of the input that gave it).
+:func:`~overbound.io.table.write_epochs` (zstd, :data:`PARTITION_COMPRESSION`; provenance of the input
+that gave it).
 The day is the GPS day of the epochs (GPS time, like the table).
 
 The manifest (``overbound.dataset/1``) holds the overbound version, the stations with their
@@ -55,11 +56,14 @@ __all__ = [
     "write_partition",
 ]
 
-#: The partitions' Parquet codec. The error and PL columns are float noise that no codec shrinks
-#: much (zstd: 5 % on a simulated station-day), and a campaign's analysis reads every partition
-#: several times: LZ4 decodes the columns 2.3 times as fast as zstd for files 15 % larger
-#: (``bench/bench_campaign.py`` prints the read time per partition).
-PARTITION_COMPRESSION = "lz4"
+#: The partitions' Parquet codec. zstd, although LZ4 decodes a station-day's columns 2.3 times as
+#: fast (6.4 ms against 15.0 ms): the error and PL columns are float noise that no codec shrinks
+#: much, LZ4's files are 15 % larger, and a campaign reads every partition many times, so whether
+#: the dataset stays in the page cache decides. Measured (``bench/bench_campaign.py``, 24 GB
+#: machine): 2 station-years (4.3 GB), full analysis 465 s zstd, 419 s LZ4; 10 station-years
+#: (18.7 GiB zstd, 21.5 GB LZ4, which no longer fits beside the workers), counting 85 s zstd,
+#: 199 s LZ4, and the full analysis 1630 s against 1825 s.
+PARTITION_COMPRESSION = "zstd"
 #: The manifest's file name inside a dataset.
 MANIFEST = "dataset.json"
 #: The manifest's schema name.

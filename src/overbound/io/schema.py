@@ -90,6 +90,7 @@ class InputError(ValueError):
     def __init__(self, source: str, message: str, line: int | None = None) -> None:
         self.source = source
         self.line = line
+        self.reason = message  # without the file and line
         where = f"{source}:{line}" if line is not None else source
         super().__init__(f"{where}: {message}")
 

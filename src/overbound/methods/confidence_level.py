@@ -31,6 +31,7 @@ __all__ = [
     "MIN_COMPUTABLE",
     "SUSPECT_BELOW",
     "BandSamples",
+    "BandSolve",
     "ConfidenceAnalysis",
     "ConfidenceBin",
     "analysed_columns",
@@ -38,8 +39,10 @@ __all__ = [
     "check_columns",
     "confidence_analysis",
     "samples_bin",
+    "solve_band",
     "target_count",
     "validate_parameters",
+    "with_solves",
 ]
 
 AXES = ("vertical", "horizontal")

@@ -203,7 +203,9 @@ def process_stations(
     progress: Progress | None = None,
 ) -> tuple[SbasRun, ...]:
     """:func:`process` of each station of the observation files (:func:`read_stations`), in the
-    order of their names: each run equals :func:`process` of that station's files alone.
+    order of their names: each run equals :func:`process` of that station's files alone with the
+    same navigation and message files (without navigation files, the ephemerides of all u-blox
+    logs serve every station).
 
     ``reference``: ``None`` (each station's RINEX header position) or ``"mean"`` (each its own
     mean); a position names one antenna, so with several stations it is refused.
@@ -328,30 +330,60 @@ def station_names(files: Sequence[tuple[str, str, tuple[float, float, float] | N
     """The station of each observation file ``(name, marker, header position)``, in order.
 
     Files are one station when their RINEX marker names are equal and their header positions are
-    within :data:`SAME_STATION_M` (a missing position agrees with any): several files of a day of
-    one receiver. A station is named by its marker, else by its first file's name up to the first
-    dot; two stations of one marker at different positions are told apart by that name
-    (``MARKER-file``). A u-blox log carries neither identity: all logs, and RINEX files without a
-    marker or position, are one station unless the caller names each file's station.
+    within :data:`SAME_STATION_M`: several files of a day of one receiver. A position of (0, 0, 0)
+    (a converter's placeholder) counts as none. Files with a position are grouped first; a file
+    with a marker but no position then joins the first station of its marker; a file with neither
+    (a u-blox log) joins the only station when there is one, else all such files are one station.
+    So the grouping does not depend on the order of files of different kinds. A station is named
+    by its marker, else by its first file's name up to the first dot; a name already taken gets
+    ``-<file>`` and then a number (``MARKER-file``, ``MARKER-file-2``).
     """
-    groups: list[tuple[str, tuple[float, float, float] | None, str]] = []
-    out = []
-    for name, marker, position in files:
-        match = next((g for g in groups if g[0] == marker and _near(g[1], position)), None)
-        if match is None:
-            label = marker or _stem(name)
-            if any(g[2] == label for g in groups):
-                label = f"{marker}-{_stem(name)}" if marker else f"{label}-{len(groups) + 1}"
-            match = (marker, position, label)
-            groups.append(match)
-        elif match[1] is None and position is not None:  # the group's position, once known
-            groups[groups.index(match)] = match = (marker, position, match[2])
-        out.append(match[2])
-    return out
+    items = [(name, marker, _position(position)) for name, marker, position in files]
+    groups: list[list] = []  # [marker, position, label]
+    label_of: dict[int, int] = {}
+
+    def new_group(i: int) -> int:
+        name, marker, position = items[i]
+        taken = {g[2] for g in groups}
+        label = marker or _stem(name)
+        if label in taken:
+            label = f"{label}-{_stem(name)}" if marker else label
+        base, k = label, 1
+        while label in taken:
+            k += 1
+            label = f"{base}-{k}"
+        groups.append([marker, position, label])
+        return len(groups) - 1
+
+    order = sorted(range(len(items)), key=lambda i: (items[i][2] is None, not items[i][1]))
+    anonymous = []
+    for i in order:
+        _, marker, position = items[i]
+        if position is None and not marker:
+            anonymous.append(i)
+            continue
+        found = next(
+            (
+                k
+                for k, g in enumerate(groups)
+                if g[0] == marker and (position is None or _near(g[1], position))
+            ),
+            None,
+        )
+        label_of[i] = new_group(i) if found is None else found
+    if anonymous:
+        only = len(groups) == 1
+        k = 0 if only else new_group(anonymous[0])
+        label_of.update(dict.fromkeys(anonymous, k))
+    return [groups[label_of[i]][2] for i in range(len(items))]
 
 
-def _near(a: tuple[float, float, float] | None, b: tuple[float, float, float] | None) -> bool:
-    return a is None or b is None or math.dist(a, b) <= SAME_STATION_M
+def _position(p: tuple[float, float, float] | None) -> tuple[float, float, float] | None:
+    return None if p is None or math.hypot(*p) < 1.0 else p
+
+
+def _near(a: tuple[float, float, float] | None, b: tuple[float, float, float]) -> bool:
+    return a is None or math.dist(a, b) <= SAME_STATION_M
 
 
 def _file_stations(files: list[_ObsFile], stations: str | Sequence[str] | None) -> list[str]:
@@ -390,7 +422,7 @@ def read_stations(
     files = _read_observations(obs)
     names = _file_stations(files, stations)
     if not files:  # no observation: one station without any, which the checks refuse
-        files, names = [_ObsFile("obs", pl.DataFrame(), ReadReport("obs", "none"))], ["obs"]
+        files, names = [_ObsFile("obs", pl.DataFrame(), ReadReport("obs", "none", 0, 0))], ["obs"]
     reports: list[tuple[str, ReadReport]] = []
     step("reading ephemerides")
     ephs = [f.eph for f in files if f.eph is not None] if not nav else []
