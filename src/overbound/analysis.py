@@ -316,9 +316,12 @@ def _analyze_campaign(
     if not counting_only:  # the methods by partition read the partitions the counting read
         failed_keys = {f.key for f in network.failures}
         parts = [p for p in partitions_in(dataset, time_range) if p.key not in failed_keys]
+        _release(client)  # after each method: its passes' memory would sit under the next one's
         cl, failures = _campaign_confidence(parts, methods, columns, client, time_range, progress)
         bands = _band_confidences(cl, levels, client, progress)
+        _release(client)
         evt_done = _campaign_evt(parts, levels, methods, client, time_range, progress)
+        _release(client)
         par = _campaign_parametric(parts, levels, methods, client, time_range, progress, failures)
     _release(client)
     return Analysis(
