@@ -344,13 +344,13 @@ def _analyze_campaign(
 def _band_confidences(cl, levels, client, progress) -> dict:
     """R8's evaluations of the verdicts (:func:`~overbound.verdict.band_confidence_inputs`), one task
     per band on the workers: the same numbers the verdicts would compute one after the other."""
-    from overbound.campaign import _Dask, _Local
+    from overbound.campaign import runner_for
     from overbound.verdict import band_confidence, band_confidence_inputs
 
     inputs = band_confidence_inputs(cl, levels)
     if progress and inputs:
         progress(f"PL confidence level at the services' risks: {len(inputs)} bands")
-    runner = _Local() if client is None else _Dask(client)
+    runner = runner_for(client)
     return dict(zip(inputs, runner.starmap(band_confidence, list(inputs.values())), strict=True))
 
 

@@ -95,6 +95,7 @@ __all__ = [
     "campaign_client",
     "count_campaign",
     "partitions_in",
+    "runner_for",
     "uncached_partitions",
 ]
 
@@ -512,6 +513,12 @@ class _Dask:
         return self.client.scatter([value], broadcast=True, hash=False)[0]
 
 
+def runner_for(client) -> _Local | _Dask:
+    """The runner of a campaign's tasks: on ``client`` (a ``distributed.Client``), or in this
+    process when it is ``None``."""
+    return _Local() if client is None else _Dask(client)
+
+
 def count_campaign(
     dataset: str | Path,
     services: Sequence[ServiceLevel],
@@ -540,7 +547,7 @@ def count_campaign(
     if not parts:
         what = "in the time range" if time_range else "(ingest inputs first)"
         raise InputError(str(dataset), f"the dataset has no partition {what}")
-    runner = _Local() if client is None else _Dask(client)
+    runner = runner_for(client)
     services = tuple(services)
     run = _Run(runner, dataset, services, runner.share(services), cache, histogram_bins, time_range, progress)
     while True:  # again without a partition that fails after pass 1 (its pass 1 is then cached)

@@ -20,13 +20,12 @@ from overbound.campaign import (
     _by_axis,
     _by_station,
     _cut,
-    _Dask,
     _Done,
     _failure,
-    _Local,
     _map_merged,
     _read,
     _ticks,
+    runner_for,
 )
 from overbound.io.dataset import Partition
 from overbound.io.schema import REQUIRED, InputError
@@ -131,7 +130,7 @@ def campaign_confidence(
     ``columns``: the optional columns of :data:`EXTRA` read (``None``: all), as the pooled table's
     analysis sees those the table was read with. An axis asked twice is analysed once."""
     parameters = parameters or ConfidenceParameters()
-    runner = _Local() if client is None else _Dask(client)
+    runner = runner_for(client)
     if not parts:
         raise ValueError("no partition to analyse")
     by_station = _by_station(list(parts))

@@ -32,12 +32,11 @@ from overbound.campaign import (
     Window,
     _by_station,
     _cut,
-    _Dask,
     _Done,
     _failure,
-    _Local,
     _map_merged,
     _read,
+    runner_for,
 )
 from overbound.io.dataset import Partition
 from overbound.io.schema import InputError, as_numpy
@@ -232,7 +231,7 @@ def campaign_parametric(
     svcs = _services(services)
     if not parts:
         raise ValueError("no partition to analyse")
-    runner = _Local() if client is None else _Dask(client)
+    runner = runner_for(client)
     # the pooled table's order (read_dataset's): stations by name, each in time order
     by_station = _by_station(sorted(parts, key=lambda p: (p.station, p.date)))
     order = [p for ps in by_station.values() for p in ps]

@@ -23,14 +23,13 @@ from overbound.campaign import (
     _by_axis,
     _by_station,
     _cut,
-    _Dask,
     _Done,
     _failure,
     _file_key,
-    _Local,
     _map_merged,
     _read,
     _ticks,
+    runner_for,
 )
 from overbound.io.dataset import Partition
 from overbound.io.schema import InputError
@@ -149,7 +148,7 @@ def campaign_tail_data(
     in these passes, is in ``failed`` with the reason."""
     if any(f[0][0] is not None for f in filters.values()):  # pass 1 would need the next day's alerts
         raise ValueError("the main series of a dataset's EVT is not filtered by a service (tail_filters)")
-    runner = _Local() if client is None else _Dask(client)
+    runner = runner_for(client)
     by_station = _by_station(list(parts))
     first = _map_merged(
         runner,

@@ -426,12 +426,12 @@ def run_network(
     """Every station-day of the campaign into ``dataset`` (created if needed), one task each on
     ``client`` (Dask) or in this process, in (station, day) order; the outcomes go into the
     manifest (``sbas_network``), and each station's reference when given."""
-    from overbound.campaign import _Dask, _Local
+    from overbound.campaign import runner_for
     from overbound.io.dataset import create_dataset, read_manifest, write_manifest
     from overbound.output import locked
 
     root = create_dataset(Path(dataset).resolve())  # the workers may run elsewhere
-    runner = _Local() if client is None else _Dask(client)
+    runner = runner_for(client)
     items = [(campaign, s, d, root) for s in campaign.stations for d in campaign.days]
     if progress:
         progress(f"SBAS engine: {len(items)} station-days")

@@ -543,9 +543,12 @@ def _band_items(cl: ConfidenceAnalysis, al: float, risk: float, cache: dict) -> 
     for b, smp in rated:
         key = (cl.axis, b.target, b.tolerance_used, risk)
         if key not in cache:
-            cache[key] = _own(cl, b, risk)
-            if cache[key] is None:
-                cache[key] = band_confidence(smp.pl, b.mean, b.sigma_inflated, b.n, risk, cl.axis)
+            own = _own(cl, b, risk)
+            cache[key] = (
+                own
+                if own is not None
+                else band_confidence(smp.pl, b.mean, b.sigma_inflated, b.n, risk, cl.axis)
+            )
         c = cache[key]
         if math.isfinite(c) and (worst is None or c < worst[1]):
             worst = (b, c)

@@ -435,15 +435,17 @@ def read_stations(
         eph = eph.unique(("prn", "toc", "iode", "iodc"), keep="first", maintain_order=True)
     step("reading SBAS messages")
     sbas_readers = {"ems": read_ems, "rinex-b": read_rinex_b}
-    shared = _read_role(sbas, "sbas", lambda raw: raw.frames, sbas_readers, lambda f: f, reports)
+    shared = SbasFrames.concat(
+        _read_role(sbas, "sbas", lambda raw: raw.frames, sbas_readers, lambda f: f, reports)
+    )  # once, for every station
     out = []
     for station in sorted(set(names)):
         mine = [f for f, n in zip(files, names, strict=True) if n == station]
         obs_table, n_dup = _merge_observations([f.table for f in mine])
-        frames = shared if sbas else [f.frames for f in mine if f.frames is not None]
+        frames = shared if sbas else SbasFrames.concat([f.frames for f in mine if f.frames is not None])
         position = next((f.position for f in mine if f.position is not None), None)
         own = tuple(("obs", f.report) for f in mine) + tuple(reports)
-        out.append(SbasInputs(obs_table, eph, SbasFrames.concat(frames), position, station, own, n_dup, klob))
+        out.append(SbasInputs(obs_table, eph, frames, position, station, own, n_dup, klob))
     return tuple(out)
 
 
