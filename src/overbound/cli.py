@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import datetime
 import functools
 import math
 import os
@@ -1400,6 +1401,235 @@ def _range_line(product, path: Path) -> str:
         f"max {_fmt(x.max())}; used ranges without SP3 data: {c['rows_without_sp3']}"
         + (f" (PRN {', '.join(map(str, prns))})" if prns else "")
     )
+
+
+@main.command("sbas-map")
+@click.option(
+    "--nav",
+    "nav",
+    cls=_ManyOption,
+    multiple=True,
+    required=True,
+    type=_FILES,
+    metavar="FILE...",
+    help="GPS broadcast ephemerides (RINEX navigation).",
+)
+@click.option(
+    "--sbas",
+    "sbas_files",
+    cls=_ManyOption,
+    multiple=True,
+    required=True,
+    type=_FILES,
+    metavar="FILE...",
+    help="SBAS messages: EMS or RINEX-B files.",
+)
+@click.option(
+    "--area",
+    nargs=4,
+    type=float,
+    default=(-30.0, 40.0, 25.0, 70.0),
+    show_default=True,
+    metavar="LON0 LON1 LAT0 LAT1",
+    help="Grid extent, deg (both ends included).",
+)
+@click.option(
+    "--step", default=1.0, show_default=True, type=click.FloatRange(min=0.01), help="Grid step, deg."
+)
+@click.option(
+    "--interval",
+    default=60.0,
+    show_default=True,
+    type=click.FloatRange(min=0.05),
+    help="Seconds between epochs.",
+)
+@click.option(
+    "--height",
+    "height_m",
+    default=0.0,
+    show_default=True,
+    type=float,
+    help="Receiver height above the ellipsoid, m.",
+)
+@_services_option
+@click.option("--mode", type=click.Choice(["PA", "NPA"]), default="PA", show_default=True)
+@click.option("--mask", "mask_deg", default=5.0, show_default=True, type=float, help="Elevation mask, deg.")
+@click.option("--geo", type=int, default=None, help="PRN of the GEO whose messages are used.")
+@click.option(
+    "--start",
+    "start",
+    default=None,
+    type=click.DateTime(["%Y-%m-%dT%H:%M:%S", "%Y-%m-%d"]),
+    help="First epoch (GPS time; default: the start of the first message's GPS day).",
+)
+@click.option(
+    "--end",
+    "end",
+    default=None,
+    type=click.DateTime(["%Y-%m-%dT%H:%M:%S", "%Y-%m-%d"]),
+    help="Epochs before this time (default: the end of the last message's GPS day).",
+)
+@click.option("--hourly", is_flag=True, help="Also one row per grid point, service and hour.")
+@click.option("--maritime", is_flag=True, help="Continuity over 15-minute windows instead of 15 s.")
+@click.option(
+    "--workers",
+    type=click.IntRange(min=0),
+    metavar="N",
+    help="N local worker processes (0, the default: this process).",
+)
+@click.option("--scheduler", metavar="ADDRESS", help="Run on the Dask cluster at ADDRESS.")
+@_output_dir("Directory of map.parquet, map.json and map.html, written whole or not at all.")
+def sbas_map(
+    nav,
+    sbas_files,
+    area,
+    step,
+    interval,
+    height_m,
+    services,
+    mode,
+    mask_deg,
+    geo,
+    start,
+    end,
+    hourly,
+    maritime,
+    workers,
+    scheduler,
+    out_dir,
+) -> None:
+    """Service-volume maps (availability, continuity, ionosphere, PL percentiles) from SBAS messages."""
+    from overbound.report.sbas_map import write_map
+    from overbound.sbas.engine import SbasOptions
+    from overbound.sbas.maps import MapGrid
+    from overbound.sbas_map import MapOptions, compute_map
+    from overbound.services import resolve_services
+
+    lon0, lon1, lat0, lat1 = area
+    if not (lon0 <= lon1 and -90 <= lat0 <= lat1 <= 90):
+        raise click.BadParameter("expected LON0 <= LON1 and -90 <= LAT0 <= LAT1 <= 90", param_hint="--area")
+
+    def us(d):
+        return None if d is None else int((d - datetime.datetime(1970, 1, 1)).total_seconds()) * 1_000_000
+
+    options = MapOptions(
+        grid=MapGrid(lon0, lon1, lat0, lat1, step, height_m), interval_s=interval, start_us=us(start),
+        end_us=us(end), services=resolve_services(list(services)) if services else (),
+        engine=SbasOptions(mode=mode, mask_deg=mask_deg, geo=geo), hourly=hourly, maritime=maritime,
+    )  # fmt: skip
+    inputs = [("nav", p) for p in nav] + [("sbas", p) for p in sbas_files]
+    with _staged(out_dir, "sbas-map") as stage:
+        with _campaign_client(out_dir, workers, scheduler, lambda: True) as client, _progress() as bar:
+            task = bar.add_task("reading", total=None)
+            smap = compute_map(list(nav), list(sbas_files), options, client=client,
+                               progress=lambda d: bar.update(task, description=d))  # fmt: skip
+        paths = write_map(stage.path, smap, inputs)
+    for s in options.chosen_services():
+        click.echo(
+            f"{s.name}: {100 * smap.share_above(s.name):.1f} % of the grid points at 99 % availability "
+            "or more"
+        )
+    for p in paths:
+        click.echo(f"{stage.final(p)}")
+
+
+@main.command("synth-obs")
+@click.option(
+    "--sp3",
+    "sp3",
+    cls=_ManyOption,
+    multiple=True,
+    required=True,
+    type=_FILES,
+    metavar="FILE...",
+    help="Precise orbits and clocks (SP3; the adjoining days' files too to cover midnight).",
+)
+@click.option(
+    "--nav",
+    "nav",
+    cls=_ManyOption,
+    multiple=True,
+    required=True,
+    type=_FILES,
+    metavar="FILE...",
+    help="GPS broadcast ephemerides (health and TGD of the records a receiver would use).",
+)
+@click.option(
+    "--ionex",
+    "ionex",
+    cls=_ManyOption,
+    multiple=True,
+    required=True,
+    type=_FILES,
+    metavar="FILE...",
+    help="Global ionosphere maps (IONEX).",
+)
+@click.option(
+    "--dcb",
+    "p1c1",
+    required=True,
+    type=click.Path(dir_okay=False, exists=True, path_type=Path),
+    help="CODE P1-C1 differential code biases (P1C1yymm.DCB).",
+)
+@click.option("--day", required=True, type=click.DateTime(["%Y-%m-%d"]), help="GPS day, YYYY-MM-DD.")
+@click.option(
+    "--point",
+    "points",
+    multiple=True,
+    metavar="NAME,LAT,LON,H",
+    help="A static receiver (repeatable); default: ten points across Europe "
+    "(overbound.sbas.synthetic_obs.EUROPE).",
+)
+@click.option(
+    "--interval",
+    default=30.0,
+    show_default=True,
+    type=click.FloatRange(min=0.05),
+    help="Seconds between epochs.",
+)
+@click.option(
+    "--start",
+    "start_s",
+    default=0.0,
+    show_default=True,
+    type=click.FloatRange(0, 86_400),
+    help="First epoch, seconds of the day.",
+)
+@click.option(
+    "--end",
+    "end_s",
+    default=86_400.0,
+    show_default=True,
+    type=click.FloatRange(0, 86_400),
+    help="Epochs before this second of the day.",
+)
+@click.option("--mask", "mask_deg", default=5.0, show_default=True, type=float, help="Elevation mask, deg.")
+@_output_dir("Directory of the RINEX files (SSSSDDD0.YYo.gz), written whole or not at all.")
+def synth_obs(sp3, nav, ionex, p1c1, day, points, interval, start_s, end_s, mask_deg, out_dir) -> None:
+    """Noise-free GPS L1 observations of static points from precise products (RINEX 2.11)."""
+    from overbound.sbas.synthetic_obs import EUROPE, SyntheticPoint, write_network
+
+    try:
+        chosen = [SyntheticPoint.parse(p) for p in points] or list(EUROPE)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="--point") from None
+    names = [p.name for p in chosen]
+    if len(set(names)) != len(names):
+        raise click.BadParameter(f"point names repeat: {', '.join(names)}", param_hint="--point")
+    with _staged(out_dir, "synth-obs") as stage:
+        written, reports = write_network(
+            chosen, day.date(), stage.path, sp3=list(sp3), nav=list(nav), ionex=list(ionex), p1c1=p1c1,
+            interval_s=interval, start_s=start_s, end_s=end_s, mask_deg=mask_deg,
+        )  # fmt: skip
+    for r in reports:
+        click.echo(
+            f"{r.source} ({r.format}): {r.rows_kept} of {r.rows_read} rows kept, rejected "
+            f"{dict(sorted(r.rejected.items()))}, invalidated {dict(sorted(r.invalidated.items()))}"
+        )
+    for w in written:
+        p = w.point
+        click.echo(f"{stage.final(w.path)}: {p.name} {p.lat_deg:.4f} {p.lon_deg:.4f} {p.height_m:.1f} m, "
+                   f"{w.n_epochs} epochs, {w.n_records} satellite records")  # fmt: skip
 
 
 @main.command()

@@ -202,6 +202,7 @@ def run_sbas(
     station: str = "",
     options: SbasOptions | None = None,
     klobuchar: Coefficients | None = None,
+    points: bool = False,
 ) -> SbasResult:
     """Process every epoch of ``obs`` (RINEX table with ``time``, ``system``, ``prn``, ``C1C``).
 
@@ -210,23 +211,32 @@ def run_sbas(
     ``klobuchar``: the GPS broadcast ionospheric coefficients (alpha, beta) of the navigation
     header (:class:`overbound.io.rinex_nav.NavHeader`), used in NPA where the grid gives no
     correction (DO-229D J.2.3); None: no fall-back, and ``counts["klobuchar"]`` says so.
+
+    ``points``: many virtual receivers at once (the service-volume maps of
+    :mod:`overbound.sbas.maps`): ``reference_ecef`` is then an (n, 3) array, ``obs`` has a ``point``
+    column (row of ``reference_ecef``) and is sorted by time, point and PRN; an epoch is a (time,
+    point) pair, and the epoch table gains the ``point`` column. Every row is computed by the same
+    code as for one receiver, with that row's receiver position.
     """
     opt = options or SbasOptions()
     obs = obs.filter(pl.col("system") == "G")
     t = times_us(obs["time"])
     prn = obs["prn"].to_numpy().astype(np.int64)
-    if not _in_order(t, prn):  # a RINEX table usually is: no sort
+    if not points and not _in_order(t, prn):  # a RINEX table usually is: no sort
         obs = obs.sort("time", "prn")
         t = times_us(obs["time"])
         prn = obs["prn"].to_numpy().astype(np.int64)
     pr = obs["C1C"].to_numpy().astype(float)
+    point = obs["point"].to_numpy().astype(np.int64) if points else None
     new_epoch = np.ones(t.size, bool)  # rows are sorted by time: an epoch starts where t changes
     new_epoch[1:] = t[1:] != t[:-1]
+    if point is not None:  # (or, for many receivers, where the point changes)
+        new_epoch[1:] |= point[1:] != point[:-1]
     epochs_us, epoch = t[new_epoch], np.cumsum(new_epoch) - 1
-    del new_epoch
     m = _select_geo(msgs, opt.geo)
-    rx = np.asarray(reference_ecef, float)
-    lat, lon, h = (float(v) for v in pymap3d.ecef2geodetic(*rx))
+    where = _Where.of(np.asarray(reference_ecef, float), point, new_epoch)
+    del new_epoch
+    lat, lon = where.lat, where.lon
     ctx = _Context(t=t, prn=prn, opt=opt, base=int(min(t.min(), times_us(m.log["time"]).min())) - 10**12,
                    epoch=epoch, epochs_us=epochs_us)  # fmt: skip
     reason = np.zeros(t.size, np.int16)
@@ -255,14 +265,14 @@ def run_sbas(
     del seg_epoch, lost
     for name, cond in fast.pop("flags"):
         flag(cond, name)
-    du = _delta_udre(ctx, m, mask, lat, lon)
+    du = _delta_udre(ctx, m, mask, where)
     for name, cond in du["flags"]:
         flag(cond & pa, name)
     ltc = _long_term(ctx, m, mask, deg, eph)
     del mask
     for name, cond in ltc.pop("flags"):
         flag(cond, name)
-    geom = _geometry(ctx, eph, pr, ltc, rx, lat, lon)
+    geom = _geometry(ctx, eph, pr, ltc, where)
     del ltc["eph_row"]
     flag(geom.pop("row") < 0, "no_ephemeris_iode")
     cov_row = du.pop("cov_row")
@@ -273,7 +283,7 @@ def run_sbas(
     model = geom["rho"] - C * geom.pop("clock") + C * geom.pop("tgd")
     flag(geom["elev"] < np.deg2rad(opt.mask_deg), "elevation")
     grid = _iono(ctx, m, geom, lat, lon, deg)
-    broadcast = _klobuchar_fallback(ctx, geom, grid, lat, lon, klobuchar) if not pa else None
+    broadcast = _klobuchar_fallback(ctx, geom, grid, where, klobuchar) if not pa else None
     keep = np.ones(t.size, bool) if broadcast is None else ~broadcast  # rows the fall-back saves
     flag(grid.pop("mask_timeout") & keep, "iono_mask_timeout")
     fail = grid.pop("fail")
@@ -282,7 +292,7 @@ def run_sbas(
     flag(~grid.pop("ok") & keep, "no_iono")
     del fail, keep
     # the zenith delays change with the day only: per epoch, then per row (mops_tropo's numbers)
-    z_hyd, z_wet = zenith_delays(lat, h, _day_of_year(epochs_us))
+    z_hyd, z_wet = zenith_delays(where.lat_ep, where.h_ep, _day_of_year(epochs_us))
     m_tropo = mapping(geom["elev"])
     tropo, sig_tropo = (z_hyd + z_wet)[epoch] * m_tropo, 0.12 * m_tropo
 
@@ -319,6 +329,7 @@ def run_sbas(
     epochs = pl.DataFrame(
         {
             "time": pl.Series(epochs_us.view("datetime64[us]")),
+            **({"point": where.point_ep} if points else {}),
             "station": pl.Series([station] * epochs_us.size, dtype=pl.Categorical),
             "hpe": np.hypot(east, north),
             "vpe": up,
@@ -333,6 +344,7 @@ def run_sbas(
     sats = pl.DataFrame(
         {
             "time": obs["time"],
+            **({"point": obs["point"]} if points else {}),
             "prn": obs["prn"],
             "used": used & ~too_few,
             "reason": pl.Series(REASONS, dtype=pl.String).gather(reason.astype(np.int64)),
@@ -378,6 +390,41 @@ def run_sbas(
 
 
 # --------------------------------------------------------------------------------------------------
+@dataclass(frozen=True, slots=True)
+class _Where:
+    """The receiver of each row: ECEF ``rx`` and geodetic ``lat``, ``lon`` (deg), ``h`` (m), and ``lat_ep``,
+    ``h_ep`` per epoch. Scalars (``rx`` (3,)) for one receiver, so that its numbers are those of a scalar
+    computation; per-row arrays (``rx`` (n, 3)) for many (``point_ep``: each epoch's point)."""
+
+    rx: np.ndarray
+    lat: float | np.ndarray
+    lon: float | np.ndarray
+    h: float | np.ndarray
+    lat_ep: float | np.ndarray
+    h_ep: float | np.ndarray
+    point_ep: np.ndarray | None = None
+
+    @staticmethod
+    def of(reference: np.ndarray, point: np.ndarray | None, new_epoch: np.ndarray) -> _Where:
+        if point is None:
+            lat, lon, h = (float(v) for v in pymap3d.ecef2geodetic(*reference))
+            return _Where(reference, lat, lon, h, lat, h)
+        plat, plon, ph = (np.asarray(v, float) for v in pymap3d.ecef2geodetic(*reference.T))
+        point_ep = point[new_epoch]
+        return _Where(reference[point], plat[point], plon[point], ph[point], plat[point_ep], ph[point_ep],
+                      point_ep)  # fmt: skip
+
+    @property
+    def many(self) -> bool:
+        return self.rx.ndim == 2
+
+    def at(self, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """``rx``, ``lat``, ``lon``, ``h`` of ``rows`` (the scalars themselves for one receiver)."""
+        if not self.many:
+            return self.rx, self.lat, self.lon, self.h  # type: ignore[return-value]
+        return self.rx[rows], self.lat[rows], self.lon[rows], self.h[rows]  # type: ignore[index]
+
+
 @dataclass(slots=True)
 class _Context:
     t: np.ndarray  # epoch time per row (us)
@@ -651,7 +698,7 @@ _SIGMA2_UDRE = (
 )  # fmt: skip
 
 
-def _delta_udre(ctx: _Context, m: SbasMessages, mask: _Mask, lat: float, lon: float) -> dict:
+def _delta_udre(ctx: _Context, m: SbasMessages, mask: _Mask, where: _Where) -> dict:
     """delta-UDRE sources (DO-229D A.4.4.13, A.4.4.16): the MT 27 value at the user, or the MT 28 row.
 
     Only one of MT 27 and MT 28 is broadcast by an SBAS; with both held, or neither, delta-UDRE is 1
@@ -667,9 +714,16 @@ def _delta_udre(ctx: _Context, m: SbasMessages, mask: _Mask, lat: float, lon: fl
     value = np.ones(n)
     flags: list = []
     if s.height:
-        v_set, t_set = _service_sets(s, m.service_regions, lat, lon)
-        v = _take(v_set, r27)
-        t_old = _take(t_set, r27, fill=0)
+        if where.many:  # the MT 27 region holding each receiver: the sets per distinct position
+            keys, inv = np.unique(np.stack([where.lat, where.lon], axis=1), axis=0, return_inverse=True)
+            sets = [_service_sets(s, m.service_regions, float(la), float(lo)) for la, lo in keys]
+            v_all = np.stack([np.append(v, np.nan) for v, _ in sets])
+            t_all = np.stack([np.append(ts, 0) for _, ts in sets])
+            v, t_old = v_all[inv.ravel(), r27], t_all[inv.ravel(), r27]
+        else:
+            v_set, t_set = _service_sets(s, m.service_regions, where.lat, where.lon)
+            v = _take(v_set, r27)
+            t_old = _take(t_set, r27, fill=0)
         incomplete = use27 & ~np.isfinite(v)
         timed_out = use27 & ~incomplete & (ctx.age(t_old) > ctx.timeout(27))
         value = np.where(use27 & ~incomplete & ~timed_out, v, 1.0)
@@ -823,8 +877,7 @@ def _long_term(ctx: _Context, m: SbasMessages, mask: _Mask, deg: _Degradation, e
     }  # fmt: skip
 
 
-def _geometry(ctx: _Context, eph: pl.DataFrame, pr: np.ndarray, ltc: dict, rx: np.ndarray,
-              lat: float, lon: float) -> dict:  # fmt: skip
+def _geometry(ctx: _Context, eph: pl.DataFrame, pr: np.ndarray, ltc: dict, where: _Where) -> dict:
     """Satellite position and clock at transmission (broadcast + long-term corrections), range,
     elevation and azimuth at the reference.
 
@@ -856,16 +909,16 @@ def _geometry(ctx: _Context, eph: pl.DataFrame, pr: np.ndarray, ltc: dict, rx: n
     pos = st.position + np.stack([ltc["dx"][i], ltc["dy"][i], ltc["dz"][i]], axis=-1)
     del st, clock
     # the light time from the position at transmission (one evaluation: the position does not change)
+    rx, lat, lon, hgt = where.at(i)
     rot = rotate_earth(pos, _distance(pos, rx) / C)
     del pos
-    d = [rot[:, k] - rx[k] for k in range(3)]  # receiver to satellite
+    d = [rot[:, k] - rx[..., k] for k in range(3)]  # receiver to satellite
     rho = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
     out["rho"][i] = rho
     for k in range(3):
         out["los"][i, k] = d[k] / rho
     del d, rho
-    e, nn, u = pymap3d.ecef2enu(rot[:, 0], rot[:, 1], rot[:, 2], lat, lon,
-                                float(pymap3d.ecef2geodetic(*rx)[2]))  # fmt: skip
+    e, nn, u = pymap3d.ecef2enu(rot[:, 0], rot[:, 1], rot[:, 2], lat, lon, hgt)
     del rot
     out["elev"][i] = np.arctan2(u, np.hypot(e, nn))
     out["azim"][i] = np.arctan2(e, nn)
@@ -880,7 +933,7 @@ def _geometry_out(n: int, row: np.ndarray) -> dict:
 
 def _distance(pos: np.ndarray, rx: np.ndarray) -> np.ndarray:
     """|pos - rx| per row of an (n, 3) array, by columns (no (n, 3) temporaries)."""
-    d = [pos[:, k] - rx[k] for k in range(3)]
+    d = [pos[:, k] - rx[..., k] for k in range(3)]
     return np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
 
 
@@ -1045,7 +1098,7 @@ def _grid_sums(t: np.ndarray, rows: np.ndarray, w: np.ndarray, r: np.ndarray, g:
 
 
 def _klobuchar_fallback(
-    ctx: _Context, geom: dict, grid: dict, lat: float, lon: float, coefficients: Coefficients | None
+    ctx: _Context, geom: dict, grid: dict, where: _Where, coefficients: Coefficients | None
 ) -> np.ndarray | None:
     """NPA: the GPS broadcast model where the grid gives no correction (DO-229D J.2.3), in ``grid``.
 
@@ -1058,6 +1111,7 @@ def _klobuchar_fallback(
     alpha, beta = coefficients
     rows = (grid["mask_timeout"] | ~grid["ok"]) & (geom["elev"] > 0)
     i = np.flatnonzero(rows)
+    _, lat, lon, _ = where.at(i)
     lat_r, lon_r = np.deg2rad(lat), np.deg2rad(lon)
     el, az = geom["elev"][i], geom["azim"][i]
     sow = np.mod(ctx.t[i] // US - _GPS_EPOCH_UNIX, 7 * 86_400).astype(float) + (ctx.t[i] % US) / US
