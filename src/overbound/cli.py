@@ -1071,15 +1071,24 @@ def _sbas_reference(lla: str | None, ecef: str | None):
 _FILES = click.Path(dir_okay=False, path_type=Path)
 
 
+def _many_files(flag: str, dest: str, help_text: str, *, required: bool = False):
+    """An option taking one or several files after one flag (``--nav a.19n b.19n``)."""
+    return click.option(flag, dest, cls=_ManyOption, multiple=True, required=required, type=_FILES,
+                        metavar="FILE...", help=help_text)  # fmt: skip
+
+
+def _interval_option(default: float):
+    return click.option("--interval", default=default, show_default=True, type=click.FloatRange(min=0.05),
+                        help="Seconds between epochs.")  # fmt: skip
+
+
+_mask_option = click.option("--mask", "mask_deg", default=5.0, show_default=True, type=float,
+                            help="Elevation mask, deg.")  # fmt: skip
+
+
 @main.command()
-@click.option(
-    "--obs",
-    "obs",
-    cls=_ManyOption,
-    multiple=True,
-    type=_FILES,
-    metavar="FILE...",
-    help="Observations: RINEX 2/3 (plain, gzip, Hatanaka) or a u-blox UBX raw log (RXM-RAW/RAWX).",
+@_many_files(
+    "--obs", "obs", "Observations: RINEX 2/3 (plain, gzip, Hatanaka) or a u-blox UBX raw log (RXM-RAW/RAWX)."
 )
 @click.option(
     "--campaign",
@@ -1107,23 +1116,13 @@ _FILES = click.Path(dir_okay=False, path_type=Path)
     help="With --campaign: run on the Dask cluster at ADDRESS (default $DASK_SCHEDULER_ADDRESS); the "
     "files and the dataset must be at the same paths on its workers.",
 )
-@click.option(
-    "--nav",
-    "nav",
-    cls=_ManyOption,
-    multiple=True,
-    type=_FILES,
-    metavar="FILE...",
-    help="GPS broadcast ephemerides (RINEX 2/3 navigation; default: those of a UBX log in --obs).",
+@_many_files(
+    "--nav", "nav", "GPS broadcast ephemerides (RINEX 2/3 navigation; default: those of a UBX log in --obs)."
 )
-@click.option(
+@_many_files(
     "--sbas",
     "sbas_files",
-    cls=_ManyOption,
-    multiple=True,
-    type=_FILES,
-    metavar="FILE...",
-    help="SBAS messages: EMS files or RINEX-B (2.10/2.11 GEO SBAS broadcast) files, plain or gzip, "
+    "SBAS messages: EMS files or RINEX-B (2.10/2.11 GEO SBAS broadcast) files, plain or gzip, "
     "recognised by content (default: the SBAS frames of a UBX log in --obs).",
 )
 @click.option(
@@ -1180,14 +1179,10 @@ _FILES = click.Path(dir_okay=False, path_type=Path)
     help="Service level of the --all-subsets counts (repeatable); default: LPV with --mode PA, NPA with "
     "--mode NPA.",
 )
-@click.option(
+@_many_files(
     "--sp3",
     "sp3",
-    cls=_ManyOption,
-    multiple=True,
-    type=_FILES,
-    metavar="FILE...",
-    help="SP3 precise orbits and clocks over the observations: also write the range-domain errors "
+    "SP3 precise orbits and clocks over the observations: also write the range-domain errors "
     "normalised by their sigmas (GIMAT 3.4), NAME.range.parquet.",
 )
 @click.option(
@@ -1404,26 +1399,8 @@ def _range_line(product, path: Path) -> str:
 
 
 @main.command("sbas-map")
-@click.option(
-    "--nav",
-    "nav",
-    cls=_ManyOption,
-    multiple=True,
-    required=True,
-    type=_FILES,
-    metavar="FILE...",
-    help="GPS broadcast ephemerides (RINEX navigation).",
-)
-@click.option(
-    "--sbas",
-    "sbas_files",
-    cls=_ManyOption,
-    multiple=True,
-    required=True,
-    type=_FILES,
-    metavar="FILE...",
-    help="SBAS messages: EMS or RINEX-B files.",
-)
+@_many_files("--nav", "nav", "GPS broadcast ephemerides (RINEX navigation).", required=True)
+@_many_files("--sbas", "sbas_files", "SBAS messages: EMS or RINEX-B files.", required=True)
 @click.option(
     "--area",
     nargs=4,
@@ -1431,18 +1408,12 @@ def _range_line(product, path: Path) -> str:
     default=(-30.0, 40.0, 25.0, 70.0),
     show_default=True,
     metavar="LON0 LON1 LAT0 LAT1",
-    help="Grid extent, deg (both ends included).",
+    help="Grid extent, deg: nodes every --step from LON0 and LAT0, up to LON1 and LAT1.",
 )
 @click.option(
     "--step", default=1.0, show_default=True, type=click.FloatRange(min=0.01), help="Grid step, deg."
 )
-@click.option(
-    "--interval",
-    default=60.0,
-    show_default=True,
-    type=click.FloatRange(min=0.05),
-    help="Seconds between epochs.",
-)
+@_interval_option(60.0)
 @click.option(
     "--height",
     "height_m",
@@ -1453,7 +1424,7 @@ def _range_line(product, path: Path) -> str:
 )
 @_services_option
 @click.option("--mode", type=click.Choice(["PA", "NPA"]), default="PA", show_default=True)
-@click.option("--mask", "mask_deg", default=5.0, show_default=True, type=float, help="Elevation mask, deg.")
+@_mask_option
 @click.option("--geo", type=int, default=None, help="PRN of the GEO whose messages are used.")
 @click.option(
     "--start",
@@ -1467,7 +1438,7 @@ def _range_line(product, path: Path) -> str:
     "end",
     default=None,
     type=click.DateTime(["%Y-%m-%dT%H:%M:%S", "%Y-%m-%d"]),
-    help="Epochs before this time (default: the end of the last message's GPS day).",
+    help="Epochs before this time (default: up to the last message + 1 s).",
 )
 @click.option("--hourly", is_flag=True, help="Also one row per grid point, service and hour.")
 @click.option("--maritime", is_flag=True, help="Continuity over 15-minute windows instead of 15 s.")
@@ -1534,36 +1505,19 @@ def sbas_map(
 
 
 @main.command("synth-obs")
-@click.option(
+@_many_files(
     "--sp3",
     "sp3",
-    cls=_ManyOption,
-    multiple=True,
+    "Precise orbits and clocks (SP3; the adjoining days' files too to cover midnight).",
     required=True,
-    type=_FILES,
-    metavar="FILE...",
-    help="Precise orbits and clocks (SP3; the adjoining days' files too to cover midnight).",
 )
-@click.option(
+@_many_files(
     "--nav",
     "nav",
-    cls=_ManyOption,
-    multiple=True,
+    "GPS broadcast ephemerides (health and TGD of the records a receiver would use).",
     required=True,
-    type=_FILES,
-    metavar="FILE...",
-    help="GPS broadcast ephemerides (health and TGD of the records a receiver would use).",
 )
-@click.option(
-    "--ionex",
-    "ionex",
-    cls=_ManyOption,
-    multiple=True,
-    required=True,
-    type=_FILES,
-    metavar="FILE...",
-    help="Global ionosphere maps (IONEX).",
-)
+@_many_files("--ionex", "ionex", "Global ionosphere maps (IONEX).", required=True)
 @click.option(
     "--dcb",
     "p1c1",
@@ -1580,13 +1534,7 @@ def sbas_map(
     help="A static receiver (repeatable); default: ten points across Europe "
     "(overbound.sbas.synthetic_obs.EUROPE).",
 )
-@click.option(
-    "--interval",
-    default=30.0,
-    show_default=True,
-    type=click.FloatRange(min=0.05),
-    help="Seconds between epochs.",
-)
+@_interval_option(30.0)
 @click.option(
     "--start",
     "start_s",
@@ -1603,19 +1551,21 @@ def sbas_map(
     type=click.FloatRange(0, 86_400),
     help="Epochs before this second of the day.",
 )
-@click.option("--mask", "mask_deg", default=5.0, show_default=True, type=float, help="Elevation mask, deg.")
+@_mask_option
 @_output_dir("Directory of the RINEX files (SSSSDDD0.YYo.gz), written whole or not at all.")
 def synth_obs(sp3, nav, ionex, p1c1, day, points, interval, start_s, end_s, mask_deg, out_dir) -> None:
     """Noise-free GPS L1 observations of static points from precise products (RINEX 2.11)."""
-    from overbound.sbas.synthetic_obs import EUROPE, SyntheticPoint, write_network
+    from overbound.sbas.synthetic_obs import EUROPE, SyntheticPoint, rinex_name, write_network
 
     try:
         chosen = [SyntheticPoint.parse(p) for p in points] or list(EUROPE)
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="--point") from None
-    names = [p.name for p in chosen]
+    names = [rinex_name(p, day.date()) for p in chosen]  # the file names: 4 characters, upper case
     if len(set(names)) != len(names):
-        raise click.BadParameter(f"point names repeat: {', '.join(names)}", param_hint="--point")
+        raise click.BadParameter(f"points would share a file: {', '.join(names)}", param_hint="--point")
+    if start_s >= end_s:
+        raise click.BadParameter("--start must be before --end", param_hint="--start")
     with _staged(out_dir, "synth-obs") as stage:
         written, reports = write_network(
             chosen, day.date(), stage.path, sp3=list(sp3), nav=list(nav), ionex=list(ionex), p1c1=p1c1,

@@ -18,14 +18,24 @@ import polars as pl
 from overbound.campaign import runner_for
 from overbound.io.open import Source
 from overbound.io.schema import InputError, ReadReport
+from overbound.methods.counting import continuity_risk
 from overbound.sbas.engine import SbasOptions
-from overbound.sbas.maps import EGNOS_AREA, MapGrid, grid_points, map_times, point_epochs, summarise
+from overbound.sbas.maps import (
+    EGNOS_AREA,
+    GEO_MIN_ELEVATION_DEG,
+    MapGrid,
+    geo_elevation,
+    grid_points,
+    map_times,
+    point_epochs,
+)
 from overbound.sbas.messages import SbasMessages, decode
 from overbound.sbas.run import read_stations
 from overbound.services import ServiceLevel, resolve_services
 
-__all__ = ["MapOptions", "ServiceMap", "compute_map", "default_services"]
+__all__ = ["MapOptions", "ServiceMap", "compute_map", "default_services", "summarise"]
 
+_US = 1_000_000
 #: Epochs per task: a day at 60 s is 24 tasks, each about one hour.
 _EPOCHS_PER_TASK = 60
 
@@ -40,8 +50,9 @@ def default_services(mode: str) -> tuple[ServiceLevel, ...]:
 @dataclass(frozen=True)
 class MapOptions:
     """What to map: the grid, the epochs (``interval_s`` from ``start_us`` to before ``end_us``, GPS
-    us; None: the GPS days of the messages), the services, the engine options (mode, mask, GEO),
-    hourly rows, and the continuity window (15 s; 15 min with ``maritime``)."""
+    us; None: from the start of the messages' GPS day to the last message + 1 s), the services, the
+    engine options (mode, mask, GEO), hourly rows, and the continuity window (15 s; 15 min with
+    ``maritime``)."""
 
     grid: MapGrid = field(default_factory=lambda: MapGrid(*EGNOS_AREA, step=1.0))
     interval_s: float = 60.0
@@ -109,7 +120,7 @@ def compute_map(
         raise InputError("--nav", "no GPS ephemeris in the navigation files")
     msgs, geo = _messages(inp.frames, options.engine.geo)
     engine = SbasOptions(**{**_fields(options.engine), "geo": geo})
-    times = map_times(msgs, options.interval_s, options.start_us, options.end_us)
+    times = map_times(msgs, options.interval_s, options.start_us, options.end_us, geo)
     if not times.size:
         raise InputError("--start/--end", "no epoch between the start and the end")
     lat, lon, ecef = grid_points(options.grid)
@@ -117,18 +128,93 @@ def compute_map(
     shared = [runner.share(v) for v in (ecef, inp.eph, msgs)]
     chunks = [times[a : a + _EPOCHS_PER_TASK] for a in range(0, times.size, _EPOCHS_PER_TASK)]
     step(f"{lat.size} grid points x {times.size} epochs in {len(chunks)} tasks")
-    parts = runner.starmap(_task, [(c, *shared, engine, inp.klobuchar) for c in chunks])
+    parts = runner.starmap(_task, [(c, *shared, engine, inp.klobuchar, (lat, lon)) for c in chunks])
     epochs = pl.concat(parts)
     step("summarising")
+    # without a GEO position (no MT 17 or MT 9) every point is taken to see it
+    visible = ~(geo_elevation(msgs, geo, lat, lon, options.grid.height_m) < GEO_MIN_ELEVATION_DEG)
     table = summarise(epochs, lat, lon, options.chosen_services(), hourly=options.hourly,
-                      window_s=options.window_s)  # fmt: skip
+                      window_s=options.window_s, geo_visible=visible)  # fmt: skip
     lat_axis, lon_axis = options.grid.axes()
     return ServiceMap(table, times, lat_axis, lon_axis, options, tuple(inp.reports), geo)
 
 
-def _task(times, ecef, eph, msgs, engine, klobuchar) -> pl.DataFrame:
-    return point_epochs(times, ecef, eph, msgs, engine, klobuchar=klobuchar)
+def _task(times, ecef, eph, msgs, engine, klobuchar, latlon) -> pl.DataFrame:
+    return point_epochs(times, ecef, eph, msgs, engine, klobuchar=klobuchar, latlon=latlon)
 
 
 def _fields(opt: SbasOptions) -> dict:
     return {name: getattr(opt, name) for name in opt.__slots__}  # type: ignore[attr-defined]
+
+
+def summarise(
+    epochs: pl.DataFrame,
+    lat: np.ndarray,
+    lon: np.ndarray,
+    services: Sequence[ServiceLevel],
+    *,
+    hourly: bool = False,
+    window_s: float = 15.0,
+    geo_visible: np.ndarray | None = None,
+) -> pl.DataFrame:
+    """The map table: one row per grid point and service (and hour when ``hourly``), see the module notes.
+
+    ``geo_visible``: per point, whether it sees the GEO (:data:`GEO_MIN_ELEVATION_DEG`); a point that
+    does not has neither the service nor the ionospheric correction at any epoch.
+
+    ``epochs``: :func:`point_epochs` (every time with every point). Columns ``lat``, ``lon``, ``service``,
+    ``hour`` (null for the whole span, else the hour since the first epoch's midnight), ``n_epochs``,
+    ``n_available``, ``availability``, ``continuity_risk``, ``hpl_p95``, ``vpl_p95``, ``hpl_p99``,
+    ``vpl_p99``, ``iono_availability``.
+    """
+    n_p = lat.size
+    times = epochs["time"].dt.epoch("us").to_numpy()[::n_p]
+    shape = (times.size, n_p)
+    hpl = epochs["hpl"].to_numpy().reshape(shape).T
+    vpl = epochs["vpl"].to_numpy().reshape(shape).T
+    iono = epochs["iono_ok"].to_numpy().reshape(shape).T
+    if geo_visible is not None:  # no message reaches a point below the GEO's horizon mask
+        hidden = ~np.asarray(geo_visible, bool)
+        hpl, vpl, iono = hpl.copy(), vpl.copy(), iono.copy()
+        hpl[hidden], vpl[hidden], iono[hidden] = np.nan, np.nan, False
+    spans: list[tuple[int | None, np.ndarray]] = [(None, np.arange(times.size))]
+    if hourly:
+        hour = (times - times[0] // (86_400 * _US) * (86_400 * _US)) // (3600 * _US)
+        spans += [(int(h), np.flatnonzero(hour == h)) for h in np.unique(hour)]
+    parts = []
+    for hour_value, cols in spans:
+        parts.append(_span_rows(times[cols], hpl[:, cols], vpl[:, cols], iono[:, cols], lat, lon, services,
+                                hour_value, window_s))  # fmt: skip
+    return pl.concat(parts)
+
+
+def _span_rows(times, hpl, vpl, iono, lat, lon, services, hour, window_s) -> pl.DataFrame:
+    n_p, n_t = hpl.shape
+    with np.errstate(invalid="ignore"):
+        solved = np.isfinite(hpl) & np.isfinite(vpl)
+        pct = {f"{name}_p{q}": _percentile(x, solved, q) for name, x in (("hpl", hpl), ("vpl", vpl))
+               for q in (95, 99)}  # fmt: skip
+    rows = []
+    for s in services:
+        with np.errstate(invalid="ignore"):
+            ok = solved & (hpl <= s.hal) & ((vpl <= s.val) if s.val is not None else True)
+        risk = [continuity_risk(times, ok[p], window_s=window_s).risk for p in range(n_p)]
+        rows.append(pl.DataFrame({
+            "lat": lat, "lon": lon, "service": [s.name] * n_p,
+            "hour": pl.Series([hour] * n_p, dtype=pl.Int32),
+            "n_epochs": np.full(n_p, n_t, np.int64), "n_available": ok.sum(axis=1).astype(np.int64),
+            "availability": ok.mean(axis=1) if n_t else np.full(n_p, np.nan),
+            "continuity_risk": pl.Series(risk, dtype=pl.Float64),
+            **{k: pct[k] for k in ("hpl_p95", "vpl_p95", "hpl_p99", "vpl_p99")},
+            "iono_availability": iono.mean(axis=1) if n_t else np.full(n_p, np.nan),
+        }))  # fmt: skip
+    return pl.concat(rows)
+
+
+def _percentile(x: np.ndarray, solved: np.ndarray, q: float) -> pl.Series:
+    """Per row, numpy's linear-interpolation percentile of the solved epochs' values (null without any)."""
+    out = np.full(x.shape[0], np.nan)
+    has = solved.any(axis=1)
+    if has.any():
+        out[has] = np.nanpercentile(np.where(solved[has], x[has], np.nan), q, axis=1)
+    return pl.Series(out).fill_nan(None)

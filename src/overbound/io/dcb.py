@@ -57,7 +57,7 @@ def read_code_dcb(source: Source) -> tuple[CodeBiases, ReadReport]:
         n_read += 1
         ident, station = line[:3].strip(), line[6:26].strip()
         try:
-            value = float(line[26:38])
+            value = float(line[23:35])  # F12.3 ending in column 35
         except ValueError:
             reason = "bad_record"
         else:

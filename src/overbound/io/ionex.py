@@ -270,7 +270,10 @@ def _parse_map(
         if label == "EPOCH OF CURRENT MAP":
             t = _epoch(block[j][:60], name)
         elif label == "EXPONENT":
-            exponent = int(block[j].split()[0])
+            try:
+                exponent = int(block[j].split()[0])
+            except (ValueError, IndexError):
+                reason = reason or "bad_row"
         elif label == "LAT/LON1/LON2/DLON/H":
             row = _lat_row(block[j][:60], lat, lon)
             data = "".join(line[:80].ljust(80) for line in block[j + 1 : j + 1 + rows_per_lat])

@@ -119,7 +119,7 @@ def _finite(x):
 _COMMON = (
     (
         "iono_availability",
-        "Share of epochs at which every satellite above the mask has a grid ionospheric correction.",
+        "Share of epochs at which the ionospheric grid corrects a pierce point at the grid point.",
     ),
     ("hpl_p95", "95th percentile of HPL (m) over the epochs with a solution."),
     ("vpl_p95", "95th percentile of VPL (m) over the epochs with a solution."),

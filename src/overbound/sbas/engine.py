@@ -114,7 +114,7 @@ from overbound.sbas.messages import FC_TIMEOUT_NPA, FC_TIMEOUT_PA, SbasMessages
 from overbound.sbas.solution import K_H_NPA, K_H_PA, K_V_PA, weighted_least_squares
 from overbound.sbas.tropo import mapping, zenith_delays
 
-__all__ = ["IONO_MODE_KLOBUCHAR", "REASONS", "SbasOptions", "SbasResult", "run_sbas"]
+__all__ = ["IONO_MODE_KLOBUCHAR", "REASONS", "SbasOptions", "SbasResult", "grid_iono_available", "run_sbas"]
 
 C = SPEED_OF_LIGHT
 
@@ -228,6 +228,8 @@ def run_sbas(
         prn = obs["prn"].to_numpy().astype(np.int64)
     pr = obs["C1C"].to_numpy().astype(float)
     point = obs["point"].to_numpy().astype(np.int64) if points else None
+    if point is not None and not _in_order_points(t, point, prn):
+        raise ValueError("run_sbas(points=True): rows must be sorted by time, point and PRN")
     new_epoch = np.ones(t.size, bool)  # rows are sorted by time: an epoch starts where t changes
     new_epoch[1:] = t[1:] != t[:-1]
     if point is not None:  # (or, for many receivers, where the point changes)
@@ -389,6 +391,35 @@ def run_sbas(
     return SbasResult(epochs=epochs, satellites=sats, counts=counts)
 
 
+def grid_iono_available(
+    msgs: SbasMessages,
+    epochs_us: np.ndarray,
+    lat: np.ndarray,
+    lon: np.ndarray,
+    options: SbasOptions | None = None,
+) -> np.ndarray:
+    """Whether the grid gives an ionospheric correction at pierce points ``lat``, ``lon`` ((p,) deg) at
+    GPS times ``epochs_us`` ((t,), increasing), (t, p): the IGP cell selection and interpolation of
+    :func:`run_sbas` (MT 18 mask and its time-out, MT 26 values and time-outs, A.4.4.10) for a pierce
+    point at the place itself (a satellite at the zenith). The fast and long-term corrections, the PRN
+    mask and the lost-message rule play no part (the ionospheric availability of gLAB's SBAS maps,
+    whose node is the pierce point)."""
+    opt = options or SbasOptions()
+    shape = (np.size(epochs_us), np.size(lat))
+    t = np.repeat(np.asarray(epochs_us, np.int64), shape[1])  # time-major: the epochs increase
+    la, lo = np.tile(np.asarray(lat, float), shape[0]), np.tile(np.asarray(lon, float), shape[0])
+    m = _select_geo(msgs, opt.geo)
+    base = int(min(t.min(), times_us(m.log["time"]).min())) - 10**12
+    n = t.size
+    ctx = _Context(t=t, prn=np.ones(n, np.int64), opt=opt, base=base, epoch=np.arange(n), epochs_us=t)
+    mt10 = _latest(ctx, m.degradation, 10)
+    no_mt10 = (mt10 < 0) | ((mt10 >= 0) & ctx.timed_out(m.degradation, mt10, 10))
+    deg = _Degradation(m.degradation, np.where(no_mt10, -1, mt10))
+    geom = {"elev": np.full(t.size, np.pi / 2), "azim": np.zeros(t.size)}
+    grid = _iono(ctx, m, geom, la, lo, deg)
+    return (grid["ok"] & ~grid["mask_timeout"]).reshape(shape)
+
+
 # --------------------------------------------------------------------------------------------------
 @dataclass(frozen=True, slots=True)
 class _Where:
@@ -403,6 +434,9 @@ class _Where:
     lat_ep: float | np.ndarray
     h_ep: float | np.ndarray
     point_ep: np.ndarray | None = None
+    point_row: np.ndarray | None = None  # each row's point, and the points' latitudes and longitudes
+    point_lat: np.ndarray | None = None
+    point_lon: np.ndarray | None = None
 
     @staticmethod
     def of(reference: np.ndarray, point: np.ndarray | None, new_epoch: np.ndarray) -> _Where:
@@ -412,7 +446,7 @@ class _Where:
         plat, plon, ph = (np.asarray(v, float) for v in pymap3d.ecef2geodetic(*reference.T))
         point_ep = point[new_epoch]
         return _Where(reference[point], plat[point], plon[point], ph[point], plat[point_ep], ph[point_ep],
-                      point_ep)  # fmt: skip
+                      point_ep, point, plat, plon)  # fmt: skip
 
     @property
     def many(self) -> bool:
@@ -478,6 +512,12 @@ def _in_order(t: np.ndarray, prn: np.ndarray) -> bool:
     """Whether the rows are strictly in (time, PRN) order (the order a sort on both gives, ties excluded)."""
     dt = t[1:] - t[:-1]
     return bool(((dt > 0) | ((dt == 0) & (prn[1:] > prn[:-1]))).all())
+
+
+def _in_order_points(t: np.ndarray, point: np.ndarray, prn: np.ndarray) -> bool:
+    """Whether the rows are strictly in (time, point, PRN) order."""
+    dt, dp = t[1:] - t[:-1], point[1:] - point[:-1]
+    return bool(((dt > 0) | ((dt == 0) & ((dp > 0) | ((dp == 0) & (prn[1:] > prn[:-1]))))).all())
 
 
 def _ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -714,16 +754,13 @@ def _delta_udre(ctx: _Context, m: SbasMessages, mask: _Mask, where: _Where) -> d
     value = np.ones(n)
     flags: list = []
     if s.height:
-        if where.many:  # the MT 27 region holding each receiver: the sets per distinct position
-            keys, inv = np.unique(np.stack([where.lat, where.lon], axis=1), axis=0, return_inverse=True)
-            sets = [_service_sets(s, m.service_regions, float(la), float(lo)) for la, lo in keys]
-            v_all = np.stack([np.append(v, np.nan) for v, _ in sets])
-            t_all = np.stack([np.append(ts, 0) for _, ts in sets])
-            v, t_old = v_all[inv.ravel(), r27], t_all[inv.ravel(), r27]
+        if where.many:  # the MT 27 region holding each receiver: the sets per point
+            v_set, t_set = _service_sets(s, m.service_regions, where.point_lat, where.point_lon)
+            v = np.concatenate([v_set, np.full((v_set.shape[0], 1), np.nan)], axis=1)[where.point_row, r27]
         else:
             v_set, t_set = _service_sets(s, m.service_regions, where.lat, where.lon)
             v = _take(v_set, r27)
-            t_old = _take(t_set, r27, fill=0)
+        t_old = _take(t_set, r27, fill=0)
         incomplete = use27 & ~np.isfinite(v)
         timed_out = use27 & ~incomplete & (ctx.age(t_old) > ctx.timeout(27))
         value = np.where(use27 & ~incomplete & ~timed_out, v, 1.0)
@@ -744,41 +781,49 @@ def _delta_udre(ctx: _Context, m: SbasMessages, mask: _Mask, where: _Where) -> d
 
 
 def _service_sets(
-    s: pl.DataFrame, regions: pl.DataFrame, lat: float, lon: float
+    s: pl.DataFrame, regions: pl.DataFrame, lat: float | np.ndarray, lon: float | np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """After each MT 27, the delta-UDRE at the user from the newest complete IODS set, and the time of that
-    set's oldest message (NaN and 0 when no set is complete) (DO-229D A.4.4.13).
+    """After each MT 27, the delta-UDRE at each user (``lat``, ``lon``: (u,) deg) from the newest complete
+    IODS set, (u, messages) ((messages,) for one user given as scalars), and the time of that set's oldest
+    message (NaN and 0 when no set is complete) (DO-229D A.4.4.13).
 
     A set is complete once messages 1..n_messages of one IODS are held; until a new IODS is complete the
     previous complete set stays in force. The user takes the region of highest priority code that
     contains it, the smallest delta-UDRE_in among equal priorities, and delta-UDRE_out outside all
-    regions.
+    regions. Which set is in force does not depend on the user: found once, then evaluated for all users.
     """
+    scalar = np.ndim(lat) == 0
+    lat, lon = np.atleast_1d(np.asarray(lat, float)), np.atleast_1d(np.asarray(lon, float))
     st = times_us(s["time"])
-    inside = _in_regions(regions, lat, lon)
+    inside = _in_regions(regions, lat[:, None], lon[:, None])  # (users, regions)
     reg_t = times_us(regions["time"])
     cols = {c: s[c].to_numpy() for c in ("iods", "n_messages", "message_number", "priority")}
     din, dout = s["dudre_in"].to_numpy(), s["dudre_out"].to_numpy()
     held: dict[int, dict[int, int]] = {}  # IODS -> message number -> row
-    value = np.full(s.height, np.nan)
+    value = np.full((lat.size, s.height), np.nan)
     t_set = np.zeros(s.height, np.int64)
-    current: tuple[float, int] = (np.nan, 0)
+    current: tuple[tuple[int, ...], int, int] | None = None  # rows, oldest time, message completing it
+    hits: dict[tuple[int, ...], np.ndarray] = {}  # per set: which of its messages' regions hold each user
     for k in range(s.height):
         iods = int(cols["iods"][k])
         held.setdefault(iods, {})[int(cols["message_number"][k])] = k
         rows = [held[iods].get(j) for j in range(1, int(cols["n_messages"][k]) + 1)]
         if all(x is not None for x in rows):
-            rows_a = np.asarray(rows)
-            hit = np.asarray([inside[reg_t == st[x]].any() for x in rows_a])  # regions of that message
-            if hit.any():
-                pri = cols["priority"][rows_a]
-                best = hit & (pri == pri[hit].max())
-                v = float(din[rows_a][best].min())
-            else:
-                v = float(dout[k])
-            current = (v, int(st[rows_a].min()))
-        value[k], t_set[k] = current
-    return value, t_set
+            current = (tuple(rows), int(st[np.asarray(rows)].min()), k)  # type: ignore[arg-type]
+        if current is None:
+            continue
+        rows_a = np.asarray(current[0])
+        hit = hits.get(current[0])
+        if hit is None:
+            hit = np.stack([inside[:, reg_t == st[x]].any(axis=1) for x in rows_a], axis=1)  # (users, set)
+            hits[current[0]] = hit
+        pri = cols["priority"][rows_a].astype(np.int64)
+        top = np.where(hit, pri, -1).max(axis=1)  # priority codes are 0-3
+        best = hit & (pri == top[:, None])
+        out = dout[current[2]]  # delta-UDRE_out of the message that completed the set
+        value[:, k] = np.where(hit.any(axis=1), np.where(best, din[rows_a], np.inf).min(axis=1), out)
+        t_set[k] = current[1]
+    return (value[0] if scalar else value), t_set
 
 
 def _in_regions(regions: pl.DataFrame, lat: float, lon: float) -> np.ndarray:

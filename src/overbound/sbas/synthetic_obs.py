@@ -25,7 +25,7 @@ ones a real receiver there would have got (and position errors are the SBAS resi
 
 Satellites: every GPS satellite with a healthy broadcast record, an SP3 orbit and clock, and an
 elevation above the mask (5 deg). Elevation and azimuth are those of the point's ellipsoidal
-vertical. The receipe and its values are those of the two files of
+vertical. The recipe and its values are those of the two files of
 ``egnos-ems-prn123-2019-014/synthetic-obs`` (Toulouse and Brussels), which the tests rebuild.
 """
 
@@ -50,7 +50,7 @@ from overbound.io.rinex_nav import (
     select_ephemeris,
 )
 from overbound.io.rinex_write import write_rinex2_obs
-from overbound.io.schema import ReadReport
+from overbound.io.schema import InputError, ReadReport
 from overbound.io.sp3 import Sp3, interpolate_clock, interpolate_position, read_sp3
 
 __all__ = [
@@ -146,6 +146,11 @@ def synthesize(
     rho = tau * SPEED_OF_LIGHT
     r = interpolate_position(sp3, col, tt, -tau)
     v = interpolate_position(sp3, col, tt, -tau + 0.5) - interpolate_position(sp3, col, tt, -tau - 0.5)
+    edge = np.isnan(v[:, 0])  # within 0.5 s of the ends of the SP3 data: a one-sided difference
+    if edge.any():
+        ahead = interpolate_position(sp3, col[edge], tt[edge], -tau[edge] + 1.0) - r[edge]
+        behind = r[edge] - interpolate_position(sp3, col[edge], tt[edge], -tau[edge] - 1.0)
+        v[edge] = np.where(np.isnan(ahead), behind, ahead)
     rel = -2.0 * np.einsum("ij,ij->i", r, v) / SPEED_OF_LIGHT**2
     clock = interpolate_clock(sp3, col, tt, -tau) + rel
     tgd = nav.table["tgd"].to_numpy()[rows]
@@ -240,13 +245,16 @@ def write_network(
     """Read the products once and write one RINEX file per point (:func:`rinex_name`) into
     ``out_dir``; the files and the products' read reports.
 
-    Epochs where the products cover no satellite (before the first SP3 epoch's transmission
-    time, after its last: give the adjoining days' SP3 files to cover midnight) are not written.
+    Epochs where the products cover no satellite are not written: before the first SP3 epoch's
+    transmission time, after its last, and outside the IONEX maps (UT: the IGS day's first map is
+    00:00:18 GPS in 2019); give the adjoining days' files to cover midnight.
     """
     orbits, r_sp3 = read_sp3(list(sp3))
     eph, r_nav = read_rinex_nav(list(nav))
     maps, r_ionex = read_ionex(list(ionex))
     biases, r_dcb = read_code_dcb(p1c1)
+    if biases.kind != "P1-C1":
+        raise InputError(str(p1c1), f"{biases.kind} biases given, P1-C1 needed (C1 = P1 - c DCB)")
     times = day_times(day, interval_s, start_s, end_s)
     products = [*sp3, *nav, *ionex, p1c1]
     out: list[WrittenFile] = []
