@@ -1082,8 +1082,14 @@ def _interval_option(default: float):
                         help="Seconds between epochs.")  # fmt: skip
 
 
-_mask_option = click.option("--mask", "mask_deg", default=5.0, show_default=True, type=float,
-                            help="Elevation mask, deg.")  # fmt: skip
+_mask_option = click.option(
+    "--mask",
+    "mask_deg",
+    default=5.0,
+    show_default=True,
+    type=click.FloatRange(0, 90),
+    help="Elevation mask (deg).",
+)
 
 
 @main.command()
@@ -1140,14 +1146,7 @@ _mask_option = click.option("--mask", "mask_deg", default=5.0, show_default=True
     show_default=True,
     help="Protection-level factors and message time-outs.",
 )
-@click.option(
-    "--mask",
-    "mask_deg",
-    default=5.0,
-    show_default=True,
-    type=click.FloatRange(0, 90),
-    help="Elevation mask (deg).",
-)
+@_mask_option
 @click.option(
     "--geo",
     type=click.IntRange(120, 158),

@@ -195,3 +195,45 @@ def test_verdicts_first_and_nothing_overflows_at_1024(driver, tmp_path):
     assert tiny == []
     tiny_html = re.findall(r"10\n?−(\d+)", text)
     assert all(int(x) <= 15 for x in tiny_html), tiny_html
+
+
+def test_service_map_renders_in_chromium(driver, tmp_path):
+    """``overbound sbas-map``'s page: every map drawn, nothing loaded, nothing wider than 1024 px."""
+    from click.testing import CliRunner
+    from selenium.webdriver.common.by import By
+
+    from overbound.cli import main
+
+    engine = Path(__file__).resolve().parents[1] / "data" / "sbas" / "engine"
+    files = ["--nav", str(engine / "brdc0140.19n.gz"), "--sbas", str(engine / "ems_1930-2210.ems.gz")]
+    grid = ["--area", "-10", "30", "35", "65", "--step", "10", "--interval", "1"]
+    span = ["--start", "2019-01-14T20:00:00", "--end", "2019-01-14T20:20:00"]
+    args = [
+        "sbas-map",
+        *files,
+        *grid,
+        *span,
+        "--service",
+        "LPV",
+        "--service",
+        "LPV-200",
+        "-o",
+        str(tmp_path / "map"),
+    ]
+    res = CliRunner().invoke(main, args)
+    assert res.exit_code == 0, res.output
+    driver.set_window_size(1024, 900)
+    driver.get((tmp_path / "map" / "map.html").resolve().as_uri())
+    assert driver.title == "SBAS service-volume map — overbound"
+    for sid in ("service-LPV", "service-LPV-200", "common"):
+        assert driver.find_element(By.ID, sid).is_displayed(), sid
+    images = driver.execute_script(
+        "return Array.from(document.images).map(i => [i.dataset.figure, i.complete, i.naturalWidth])"
+    )
+    names = sorted(n for n, _, _ in images)
+    maps = [f"{kind}-{s}" for kind in ("availability", "continuity") for s in ("LPV", "LPV-200")]
+    assert names == sorted([*maps, "iono_availability", "hpl_p95", "vpl_p95"])
+    assert all(complete and width > 0 for _, complete, width in images)
+    assert driver.execute_script("return performance.getEntriesByType('resource').length") == 0
+    width = driver.execute_script("return document.documentElement.clientWidth")
+    assert driver.execute_script("return document.documentElement.scrollWidth") <= width
