@@ -9,6 +9,7 @@ every (epoch, point) is computed by the engine from the whole message history.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -119,7 +120,7 @@ def compute_map(
     if not inp.eph.height:
         raise InputError("--nav", "no GPS ephemeris in the navigation files")
     msgs, geo = _messages(inp.frames, options.engine.geo)
-    engine = SbasOptions(**{**_fields(options.engine), "geo": geo})
+    engine = dataclasses.replace(options.engine, geo=geo)
     times = map_times(msgs, options.interval_s, options.start_us, options.end_us, geo)
     if not times.size:
         raise InputError("--start/--end", "no epoch between the start and the end")
@@ -141,10 +142,6 @@ def compute_map(
 
 def _task(times, ecef, eph, msgs, engine, klobuchar, latlon) -> pl.DataFrame:
     return point_epochs(times, ecef, eph, msgs, engine, klobuchar=klobuchar, latlon=latlon)
-
-
-def _fields(opt: SbasOptions) -> dict:
-    return {name: getattr(opt, name) for name in opt.__slots__}  # type: ignore[attr-defined]
 
 
 def summarise(

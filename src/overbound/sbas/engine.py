@@ -228,7 +228,7 @@ def run_sbas(
         prn = obs["prn"].to_numpy().astype(np.int64)
     pr = obs["C1C"].to_numpy().astype(float)
     point = obs["point"].to_numpy().astype(np.int64) if points else None
-    if point is not None and not _in_order_points(t, point, prn):
+    if point is not None and not _in_order(t, point, prn):
         raise ValueError("run_sbas(points=True): rows must be sorted by time, point and PRN")
     new_epoch = np.ones(t.size, bool)  # rows are sorted by time: an epoch starts where t changes
     new_epoch[1:] = t[1:] != t[:-1]
@@ -508,16 +508,16 @@ def _with_fill(values: np.ndarray, fill: float = np.nan) -> np.ndarray:
     return out
 
 
-def _in_order(t: np.ndarray, prn: np.ndarray) -> bool:
-    """Whether the rows are strictly in (time, PRN) order (the order a sort on both gives, ties excluded)."""
-    dt = t[1:] - t[:-1]
-    return bool(((dt > 0) | ((dt == 0) & (prn[1:] > prn[:-1]))).all())
-
-
-def _in_order_points(t: np.ndarray, point: np.ndarray, prn: np.ndarray) -> bool:
-    """Whether the rows are strictly in (time, point, PRN) order."""
-    dt, dp = t[1:] - t[:-1], point[1:] - point[:-1]
-    return bool(((dt > 0) | ((dt == 0) & ((dp > 0) | ((dp == 0) & (prn[1:] > prn[:-1]))))).all())
+def _in_order(*keys: np.ndarray) -> bool:
+    """Whether the rows are strictly in the order of ``keys`` (e.g. time, PRN: the order a sort on them
+    gives, ties excluded)."""
+    ahead = np.zeros(max(keys[0].size - 1, 0), bool)  # decided: the row is after the previous one
+    tied = ~ahead  # equal on the keys so far
+    for k in keys:
+        d = k[1:] - k[:-1]
+        ahead |= tied & (d > 0)
+        tied &= d == 0
+    return bool(ahead.all())
 
 
 def _ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:

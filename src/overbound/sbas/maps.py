@@ -137,7 +137,7 @@ def virtual_observations(times_us: np.ndarray, points_ecef: np.ndarray, eph: pl.
         {
             "time": pl.Series(times_us[t_idx[s_i]], dtype=pl.Int64).cast(pl.Datetime("us")),
             "point": p_i.astype(np.int32),
-            "system": pl.Series(["G"], dtype=pl.String).gather(np.zeros(s_i.size, np.int64)),
+            "system": pl.repeat("G", s_i.size, eager=True),
             "prn": (prn_idx[s_i] + 1).astype(np.int16),
             "C1C": rng[s_i, p_i],
         }
@@ -145,28 +145,24 @@ def virtual_observations(times_us: np.ndarray, points_ecef: np.ndarray, eph: pl.
 
 
 def _nearest_records(eph: pl.DataFrame, times_us: np.ndarray) -> np.ndarray:
-    """Per (time, PRN 1..32) the broadcast record whose toe is nearest (any health), -1 beyond 4 h."""
+    """Per (time, PRN 1..32) the broadcast record whose toe is nearest (any health; the earlier of two
+    equally near), -1 beyond 4 h: one search of (PRN, toe) keys for every (time, PRN)."""
     prn = eph["prn"].to_numpy().astype(np.int64)
     toe = eph["toe_time"].dt.epoch("us").to_numpy()
     key = prn * (1 << 42) + (toe - toe.min() + (1 << 40))
     order = np.argsort(key)
     key = key[order]
-    out = np.full((times_us.size, 32), -1, np.int64)
-    for p in range(1, 33):  # 32 searches over the day's ~400 records
-        q = p * (1 << 42) + (times_us - toe.min() + (1 << 40))
-        pos = np.searchsorted(key, q)
-        best = np.full(times_us.size, -1, np.int64)
-        best_d = np.full(times_us.size, np.iinfo(np.int64).max)
-        for cand in (pos - 1, pos):
-            ok = (cand >= 0) & (cand < key.size)
-            c = np.clip(cand, 0, key.size - 1)
-            ok &= key[c] // (1 << 42) == p
-            d = np.abs(key[c] - q)
-            better = ok & (d < best_d)
-            best = np.where(better, order[c], best)
-            best_d = np.where(better, d, best_d)
-        out[:, p - 1] = np.where(best_d <= 4 * 3600 * _US, best, -1)
-    return out
+    q = np.arange(1, 33) * (1 << 42) + (times_us - toe.min() + (1 << 40))[:, None]  # (T, 32)
+    pos = np.searchsorted(key, q)
+    best = np.full(q.shape, -1, np.int64)
+    best_d = np.full(q.shape, np.iinfo(np.int64).max)
+    for cand in (pos - 1, pos):  # the records on either side of the time, the same PRN only
+        c = np.clip(cand, 0, key.size - 1)
+        d = np.abs(key[c] - q)
+        better = (cand >= 0) & (cand < key.size) & (key[c] >> 42 == q >> 42) & (d < best_d)
+        best = np.where(better, order[c], best)
+        best_d = np.where(better, d, best_d)
+    return np.where(best_d <= 4 * 3600 * _US, best, -1)
 
 
 def point_epochs(
@@ -189,6 +185,7 @@ def point_epochs(
     change the cell its pierce point falls in).
     """
     per_epoch = max(1, _ROWS_PER_CHUNK // max(points_ecef.shape[0] * 12, 1))
+    latlon = latlon if latlon is not None else pymap3d.ecef2geodetic(*points_ecef.T)[:2]
     parts = [
         _chunk(times_us[a : a + per_epoch], points_ecef, eph, msgs, options, klobuchar, latlon)
         for a in range(0, times_us.size, per_epoch)
@@ -203,8 +200,7 @@ def _chunk(t: np.ndarray, points_ecef: np.ndarray, eph: pl.DataFrame, msgs: Sbas
         "time": pl.Series(np.repeat(t, n_p), dtype=pl.Int64).cast(pl.Datetime("us")),
         "point": np.tile(np.arange(n_p, dtype=np.int32), t.size),
     })  # fmt: skip
-    lat, lon = latlon if latlon is not None else pymap3d.ecef2geodetic(*points_ecef.T)[:2]
-    full = full.with_columns(iono_ok=grid_iono_available(msgs, t, lat, lon, options).ravel())
+    full = full.with_columns(iono_ok=grid_iono_available(msgs, t, *latlon, options).ravel())
     obs = virtual_observations(t, points_ecef, eph, options.mask_deg)
     if obs.is_empty():
         return full.with_columns(hpl=pl.lit(np.nan), vpl=pl.lit(np.nan), nsv=pl.lit(0, pl.Int64))

@@ -154,7 +154,7 @@ def synthesize(
     rel = -2.0 * np.einsum("ij,ij->i", r, v) / SPEED_OF_LIGHT**2
     clock = interpolate_clock(sp3, col, tt, -tau) + rel
     tgd = nav.table["tgd"].to_numpy()[rows]
-    dcb = np.array([p1c1.satellites.get(s, np.nan) for s in sats.tolist()]) * 1e-9
+    dcb = np.array([p1c1.satellites.get(f"G{p:02d}", np.nan) for p in prn])[pp - 1] * 1e-9
     iono = slant_delay_l1(ionex, tt, point.lat_deg, point.lon_deg, el, az)
     common = rho - SPEED_OF_LIGHT * (clock - tgd + dcb) + troposphere_delay(point.height_m, el)
     c1 = common + iono
