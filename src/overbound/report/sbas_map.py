@@ -15,7 +15,7 @@ import numpy as np
 import polars as pl
 from matplotlib.axes import Axes
 from matplotlib.collections import PolyCollection
-from matplotlib.colors import BoundaryNorm, ListedColormap
+from matplotlib.colors import BoundaryNorm, ListedColormap, LogNorm
 
 from overbound.report.figures import new_figure, style
 from overbound.report.json import file_digest, provenance_dict
@@ -36,7 +36,7 @@ def map_dict(smap: ServiceMap, inputs: Sequence[tuple[str, str | Path]]) -> dict
     epoch span, and per service the share of the grid points at or above 99 % availability."""
     o = smap.options
     g = o.grid
-    t = smap.times_us.astype("datetime64[us]")
+    t = smap.times_us.astype("datetime64[us]").astype("datetime64[s]")  # epochs are whole seconds
     return {
         "schema": SCHEMA,
         "provenance": provenance_dict(),
@@ -68,7 +68,9 @@ def map_dict(smap: ServiceMap, inputs: Sequence[tuple[str, str | Path]]) -> dict
 
 def plot_map(smap: ServiceMap, service: str, column: str, *, ax: Axes | None = None) -> Axes:
     """``column`` of ``service`` (whole span) on the grid cells, over the land outlines; availability
-    columns in the report classes, the others on a continuous scale. The mesh has ``gid`` ``map``."""
+    columns in the report classes, protection levels on a log scale (the edge of the service area
+    reaches kilometres), the others on a linear one. Columns that do not depend on the service (the
+    ionosphere, the PLs) are titled without it. The mesh has ``gid`` ``map``."""
     t = smap.table.filter((pl.col("service") == service) & pl.col("hour").is_null())
     values = t[column].cast(pl.Float64).fill_null(np.nan).to_numpy().reshape(smap.lat_axis.size, -1)
     step = smap.options.grid.step
@@ -84,6 +86,9 @@ def plot_map(smap: ServiceMap, service: str, column: str, *, ax: Axes | None = N
                 BoundaryNorm(AVAILABILITY_CLASSES, len(_CLASS_COLOURS)),
             )
             mesh = ax.pcolormesh(lon_e, lat_e, values, cmap=cmap, norm=norm, alpha=0.85)
+        elif column.startswith(("hpl", "vpl")) and np.isfinite(values).any():
+            norm = LogNorm(vmin=max(np.nanmin(values), 1.0), vmax=max(np.nanmax(values), 2.0))
+            mesh = ax.pcolormesh(lon_e, lat_e, values, cmap="viridis", norm=norm, alpha=0.85)
         else:
             mesh = ax.pcolormesh(lon_e, lat_e, values, cmap="viridis", alpha=0.85)
         mesh.set_gid("map")
@@ -93,7 +98,8 @@ def plot_map(smap: ServiceMap, service: str, column: str, *, ax: Axes | None = N
         ax.set_aspect(1.0 / max(np.cos(np.radians(np.mean(smap.lat_axis))), 0.2))
         ax.set_xlabel("longitude (deg)")
         ax.set_ylabel("latitude (deg)")
-        ax.set_title(f"{service}: {column.replace('_', ' ')}")
+        what = column.replace("_", " ")
+        ax.set_title(f"{service}: {what}" if column in ("availability", "continuity_risk") else what)
         bar = ax.figure.colorbar(mesh, ax=ax, shrink=0.8)
         if classes:
             labels = ["0", "50", "75", "90", "95", "99", "99.5", "99.9", "100 %"]
@@ -108,12 +114,8 @@ def write_map(out_dir: Path, smap: ServiceMap, inputs: Sequence[tuple[str, str |
     smap.table.write_parquet(parquet, compression="zstd", statistics=False)
     doc = map_dict(smap, inputs)
     js = out_dir / "map.json"
-    js.write_text(json.dumps(doc, indent=2, allow_nan=False, default=_finite) + "\n")
+    js.write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n")
     return [parquet, js, _write_html(out_dir / "map.html", smap, doc)]
-
-
-def _finite(x):
-    raise TypeError(f"not JSON: {x!r}")
 
 
 _COMMON = (
