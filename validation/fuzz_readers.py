@@ -78,15 +78,25 @@ TARGETS: tuple[str, ...] = (
     "ems",
     "rinex_b",
     "ubx_raw",
+    "g1000",
+    "sbf",
+    "nmea",
 )
-EPOCH_TARGETS = ("rtklib-pos", "glab", "ubx", "csv", "parquet")
+EPOCH_TARGETS = ("rtklib-pos", "glab", "ubx", "csv", "parquet", "g1000", "sbf", "nmea")
 OUTCOMES = ("ok", "clean_error", "unnamed_error", "traceback", "unbalanced", "hang", "memory", "crash")
 ACCEPTABLE = ("ok", "clean_error")
 
 #: True antenna positions the formats with positions need (tests/io/test_rtklib.py, test_ubx.py).
 RTKLIB_REFERENCE = "35.311803,-120.661092,134.6419"
 UBX_REFERENCE = "43.5607,1.4809,207.0"
-_REFERENCES = {"rtklib-pos": RTKLIB_REFERENCE, "ubx": UBX_REFERENCE}
+SBF_REFERENCE = "50.848642,4.732128,128.33"
+NMEA_REFERENCE = "50.848642,4.732128,128.33"
+_REFERENCES = {
+    "rtklib-pos": RTKLIB_REFERENCE,
+    "ubx": UBX_REFERENCE,
+    "sbf": SBF_REFERENCE,
+    "nmea": NMEA_REFERENCE,
+}
 
 SEED_LIMIT = 200_000  # bytes of decompressed content kept of a big fixture
 ROLE_LIMIT = 300_000  # ... of one the `overbound sbas` CLI cases use (keeps the engine fixtures whole)
@@ -106,6 +116,14 @@ _EPOCH_RE: dict[str, tuple[re.Pattern[bytes], ...]] = {
     ),
     "glab": (re.compile(rb"^(?:SBASOUT|OUTPUT|INFO)\s+(?P<year>\d{4})\s+\d{3}\s+(?P<sod>\d+\.\d+)", re.M),),
     "csv": (re.compile(rb"^(?P<year>\d{4})-\d\d-\d\d[T ](?P<hour>\d\d):", re.M),),
+    "nmea": (
+        re.compile(rb"^\$G[A-Z]GFA,(?P<hour>\d\d)\d{4}", re.M),
+        re.compile(
+            rb"^\$G[A-Z]RMC,(?P<hour>\d\d)\d{4}[^,]*,[AV],[^,]*,[NS],[^,]*,[EW],[^,]*,[^,]*,\d{4}(?P<year>\d\d),",
+            re.M,
+        ),
+    ),
+    "g1000": (re.compile(rb"^(?P<year>\d{4})-\d\d-\d\d,\s*(?P<hour>\d\d):\d\d:\d\d", re.M),),
     "rinex_obs": (
         re.compile(rb"^> (?P<year>\d{4}) [ \d]\d [ \d]\d (?P<hour>[ \d]\d) ", re.M),
         re.compile(
@@ -132,7 +150,7 @@ class Seed:
     name: str  # file name without a ``.gz`` suffix
     content: bytes
     gz: bool  # the fixture was gzip-compressed
-    unit: str  # "line", "comma" (hex-wrapped UBX) or "frame" (binary UBX); "parquet" for Parquet
+    unit: str  # "line", "comma" (hex-wrapped UBX), "frame" (binary UBX), "block" (SBF); "parquet" for Parquet
     fixed: bool = False  # fixed-width columns (RINEX, SP3): field mutations keep the width
     role: str = ""  # its place in the `overbound sbas` CLI cases: obs, nav, sbas, sp3, ubx
     origin: str = ""  # the fixture it comes from, relative to the repository
@@ -164,6 +182,9 @@ def _cut(content: bytes, target: str, unit: str, limit: int) -> bytes:
     if unit == "frame":
         frames = [f for f in _ubx_frames(content) if f[1] <= limit and content[f[0] : f[0] + 2] == _UBX_SYNC]
         return content[: frames[-1][1]] if frames else content[:limit]
+    if unit == "block":
+        ends = [b for _, b in _sbf_blocks(content) if b <= limit]
+        return content[: ends[-1]] if ends else content[:limit]
     sep = b"," if unit == "comma" else b"\n"
     head = content[: content.rfind(sep, 0, limit) + 1]
     matches = [m for p in _EPOCH_RE.get(target, ()) for m in p.finditer(head)]
@@ -275,6 +296,13 @@ def load_seeds() -> dict[str, tuple[Seed, ...]]:
         )
     )
     seeds.append(_fixture("ubx_raw", s + "ublox/ubx_20080526_60s.ubx.gz", "frame"))
+    seeds += [
+        _fixture("g1000", f"tests/data/g1000/{p.name}") for p in sorted((DATA / "g1000").glob("*.csv.gz"))
+    ]
+    seeds += [
+        _fixture("sbf", f"tests/data/sbf/{p.name}", "block") for p in sorted((DATA / "sbf").glob("*.gz"))
+    ]
+    seeds += [_fixture("nmea", f"tests/data/nmea/{p.name}") for p in sorted((DATA / "nmea").glob("*.gz"))]
     out: dict[str, list[Seed]] = defaultdict(list)
     for seed in seeds:
         out[seed.target].append(seed)
@@ -291,10 +319,28 @@ def _int(rng: Rng, lo: int, hi: int) -> int:
     return int(rng.integers(lo, hi)) if hi > lo else lo
 
 
+def _sbf_blocks(data: bytes) -> list[tuple[int, int]]:
+    """(start, end) of the SBF blocks (sync ``$@``, length at bytes 6-7), the bytes between them their own."""
+    out, i, start = [], data.find(b"$@"), 0
+    while i >= 0:
+        length = int.from_bytes(data[i + 6 : i + 8], "little")
+        end = i + length if length >= 8 and i + length <= len(data) else len(data)
+        if i > start:
+            out.append((start, i))
+        out.append((i, end))
+        start = end
+        i = data.find(b"$@", max(end, i + 2))
+    if start < len(data):
+        out.append((start, len(data)))
+    return out
+
+
 def _units(data: bytes, seed: Seed) -> list[bytes]:
-    """The file cut into lines (with their ends), comma-separated tokens or UBX frames."""
+    """The file cut into lines (with their ends), comma-separated tokens, UBX frames or SBF blocks."""
     if seed.unit == "frame":
         return [data[a:b] for a, b in _ubx_frames(data)]
+    if seed.unit == "block":
+        return [data[a:b] for a, b in _sbf_blocks(data)]
     sep = b"," if seed.unit == "comma" else b"\n"
     parts = data.split(sep)
     return [p + sep for p in parts[:-1]] + ([parts[-1]] if parts[-1] else [])
@@ -333,7 +379,7 @@ def m_byte_delete(data: bytes, rng: Rng, seed: Seed) -> tuple[bytes, str]:
 
 
 def _unit_word(seed: Seed) -> str:
-    return {"frame": "frame", "comma": "token"}.get(seed.unit, "line")
+    return {"frame": "frame", "comma": "token", "block": "block"}.get(seed.unit, "line")
 
 
 def m_line_delete(data: bytes, rng: Rng, seed: Seed) -> tuple[bytes, str]:
@@ -598,14 +644,14 @@ _PARQUET = ("parquet_flip_data", "parquet_flip_footer", "parquet_meta_json")
 
 def mutations_for(seed: Seed) -> tuple[str, ...]:
     """The mutation names that apply to a seed's kind of content."""
-    extra = {"line": _TEXT, "comma": _HEX, "frame": _FRAME, "parquet": _PARQUET}[seed.unit]
+    extra = {"line": _TEXT, "comma": _HEX, "frame": _FRAME, "block": _FRAME, "parquet": _PARQUET}[seed.unit]
     return _BYTE + extra + _GZIP
 
 
 def _mutation_name(mutation: str, seed: Seed) -> str:
     """The recorded name: line operations on UBX frames or hex tokens say so."""
-    if mutation.startswith("line_") and seed.unit in ("frame", "comma"):
-        return mutation.replace("line_", "frame_" if seed.unit == "frame" else "token_")
+    if mutation.startswith("line_") and seed.unit in ("frame", "comma", "block"):
+        return mutation.replace("line_", {"frame": "frame_", "comma": "token_", "block": "block_"}[seed.unit])
     return mutation
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import datetime as dt
 import traceback
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -15,8 +15,8 @@ import polars as pl
 from overbound._allocator import release_freed_memory
 from overbound.campaign import CampaignCounting, count_campaign, partitions_in
 from overbound.io.dataset import Partition, is_dataset, read_manifest
-from overbound.io.geodesy import Reference
-from overbound.io.open import Source, read, source_name
+from overbound.io.geodesy import MeanPosition, Reference
+from overbound.io.open import Source, expand_archives, read, source_name
 from overbound.io.schema import InputError, ReadReport, validate_epochs
 from overbound.methods.confidence_level import ConfidenceAnalysis, confidence_analysis
 from overbound.methods.counting import CountingResult, count_kpis
@@ -25,6 +25,7 @@ from overbound.services import SERVICES, ServiceLevel, resolve_services
 
 if TYPE_CHECKING:  # imported when run: they are the slow part of the import
     from overbound.methods.parametric import ParametricAnalysis
+    from overbound.methods.protection_levels import PlOnlyAnalysis
     from overbound.methods.tail_extrapolation import TailAnalysis
 
 __all__ = ["Analysis", "Verdict", "analyze", "load_epochs", "verdicts"]
@@ -58,6 +59,12 @@ class Analysis:
     network : for a campaign dataset, its analysis by partition
         (:class:`~overbound.campaign.CampaignCounting`: per-day availability, partitions that
         could not be read, cache use); ``counting`` is then its merged result.
+    pl_only : for inputs without truth (errors unknown, e.g. a flight log), the protection-level-only
+        analysis (:mod:`overbound.methods.protection_levels`); ``counting`` is then its counting,
+        whose error-based KPIs are meaningless, and no method nor verdict is run.
+    warnings : what the reader must know before trusting the numbers, shown on the report's first
+        screen and in ``summary.json``: errors against the mean position (``--reference mean``), an
+        error scale implausible for the reference (:func:`input_warnings`).
     band_confidences : the confidence levels of the PL bands the verdicts re-evaluate at each
         service's risk (R8 of :mod:`overbound.verdict`), computed ahead on a campaign's workers
         (keys of :func:`~overbound.verdict.band_confidence_inputs`); empty: the verdicts compute them.
@@ -76,10 +83,16 @@ class Analysis:
     method_failures: tuple[tuple[str, str, str], ...] = ()
     network: CampaignCounting | None = None
     band_confidences: dict = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
+    pl_only: PlOnlyAnalysis | None = None
 
     @property
     def n_rejected(self) -> int:
         return sum(r.n_rejected for r in self.reports)
+
+    @property
+    def n_invalidated(self) -> int:
+        return sum(sum(r.invalidated.values()) for r in self.reports)
 
 
 def load_epochs(
@@ -103,7 +116,7 @@ def load_epochs(
     if not inputs:
         raise InputError("<inputs>", "no input files given")
     tables, reports = [], []
-    for src in inputs:
+    for src in expand_archives(inputs):
         if progress:
             progress(source_name(src))
         t, r = read(
@@ -135,7 +148,7 @@ def analyze(
     *,
     services: Sequence[str] | Sequence[ServiceLevel] | None = None,
     format: str | None = None,
-    reference: Reference | None = None,
+    reference: Reference | MeanPosition | None = None,
     station: str | None = None,
     strict: bool = False,
     mapping: Mapping[str, str] | None = None,
@@ -221,9 +234,69 @@ def analyze(
         )
         label = title or ", ".join(Path(source_name(s)).name for s in inputs)
     levels = _levels(services)
+    if reports and not any(r.truth for r in reports):
+        return _pl_only(table, reports, levels, label, progress)
+    if not all(r.truth for r in reports):
+        raise InputError(
+            ", ".join(r.source for r in reports if not r.truth),
+            "no truth (errors unknown) while other inputs have errors: analyse them separately",
+        )
     if progress:
         progress("counting KPIs")
-    return _with_methods(table, reports, levels, count_kpis(table, levels), label, methods, progress)
+    done = _with_methods(table, reports, levels, count_kpis(table, levels), label, methods, progress)
+    return replace(done, warnings=input_warnings(table, reference))
+
+
+def _pl_only(table, reports, levels, label, progress) -> Analysis:
+    """The analysis of inputs without truth: what the protection levels alone give."""
+    from overbound.methods.protection_levels import NO_TRUTH, pl_only_analysis
+
+    if progress:
+        progress("protection levels without truth")
+    result = pl_only_analysis(table, levels)
+    note = (
+        f"Protection levels only, {NO_TRUTH}. Availability, continuity and the PL distributions are given; "
+        "accuracy, MI/HMI, the Stanford diagrams, the three papers' methods and the verdicts need the errors "
+        "and are not computed."
+    )
+    warnings = (note, *((result.continuity_caution,) if result.continuity_caution else ()))
+    return Analysis(table, reports, levels, result.counting, label, warnings=warnings, pl_only=result)
+
+
+#: Median HPE (m) above which the errors are taken to come from a wrong reference position: an SBAS or
+#: even a standalone GPS solution is within a few metres of truth (a height in feet, a swapped sign or
+#: another station's coordinates give tens to thousands of metres).
+IMPLAUSIBLE_MEDIAN_HPE_M = 50.0
+#: The same for the median |VPE| (m).
+IMPLAUSIBLE_MEDIAN_VPE_M = 50.0
+
+
+def input_warnings(table: pl.DataFrame, reference: Reference | MeanPosition | None) -> tuple[str, ...]:
+    r"""What the report must say first about the errors of ``table``: that they are against the mean
+    position (``reference`` :data:`~overbound.io.geodesy.MEAN_POSITION`), and whether their scale is
+    implausible (median HPE above :data:`IMPLAUSIBLE_MEDIAN_HPE_M` or median \|VPE\| above
+    :data:`IMPLAUSIBLE_MEDIAN_VPE_M` over the epochs with a solution)."""
+    out = []
+    if isinstance(reference, MeanPosition):
+        out.append(
+            "Errors are against the mean of the receiver's own positions (of each input file, over the "
+            "whole file), not a surveyed position: HPE and VPE show the scatter about that mean, a constant "
+            "bias of the receiver is invisible, and the integrity results are optimistic to that extent."
+        )
+    ok = table.filter(pl.all_horizontal(pl.col("hpe", "vpe", "hpl", "vpl").is_finite()))
+    if ok.height:
+        hpe, vpe = ok["hpe"].median(), ok["vpe"].abs().median()
+        if hpe > IMPLAUSIBLE_MEDIAN_HPE_M or vpe > IMPLAUSIBLE_MEDIAN_VPE_M:
+            check = (
+                "Check the reference position (a height in feet, a sign, another station's coordinates)"
+                if reference is not None
+                else "Check the input's errors (their unit, and the position they were computed against)"
+            )
+            out.append(
+                f"The median HPE is {hpe:.3g} m and the median |VPE| {vpe:.3g} m: implausible for a GNSS "
+                f"receiver. {check}; every integrity result below rests on it."
+            )
+    return tuple(out)
 
 
 @dataclass(frozen=True, slots=True)

@@ -20,7 +20,7 @@ from rich.table import Table
 
 from overbound import __version__
 from overbound.io.dataset import is_dataset
-from overbound.io.geodesy import Reference
+from overbound.io.geodesy import MEAN_POSITION, MeanPosition, Reference
 from overbound.io.open import FORMATS
 from overbound.io.schema import InputError
 from overbound.output import OutputError, StagedDirectory, staged_directory, staged_files
@@ -76,9 +76,11 @@ def _staged(out_dir: Path, command: str) -> Iterator[StagedDirectory]:
                       highlight=False, soft_wrap=True)  # fmt: skip
 
 
-def _reference(lla: str | None, ecef: str | None) -> Reference | None:
+def _reference(lla: str | None, ecef: str | None) -> Reference | MeanPosition | None:
     if lla and ecef:
         raise click.UsageError("give --reference or --reference-ecef, not both")
+    if lla is not None and lla.strip().lower() == "mean":
+        return MEAN_POSITION
     try:
         if lla:
             return Reference.parse(lla)
@@ -114,13 +116,50 @@ def main() -> None:
     """GNSS integrity verification: availability, continuity, Stanford diagrams and MI statistics."""
 
 
-_TIME_FORMATS = ["%Y-%m-%dT%H:%M:%S", "%Y-%m-%d %H:%M:%S", "%Y-%m-%dT%H:%M", "%Y-%m-%d"]
+class _Instant(click.ParamType):
+    """An ISO 8601 time for --start/--end: date, ``T`` or a space, seconds with a fraction or none; a
+    trailing ``Z`` or a UTC offset (``+02:00``) makes it UTC whatever --time-scale says. Converted to
+    ``(naive datetime, is_utc)``; :func:`_gps_time` turns it into GPS time."""
+
+    name = "time"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, tuple):
+            return value
+        text = str(value).strip()
+        zulu = text[-1:] in ("Z", "z")
+        try:
+            t = datetime.datetime.fromisoformat(text[:-1] if zulu else text)
+        except ValueError:
+            self.fail(
+                f"{value!r}: expected an ISO 8601 time, e.g. 2024-01-07T06:00:00 or 2024-01-07 06:00:00Z"
+            )
+        if t.tzinfo is not None:
+            return t.astimezone(datetime.UTC).replace(tzinfo=None), True
+        return t, zulu
+
+
+def _gps_time(value: tuple[datetime.datetime, bool] | None, scale: str) -> datetime.datetime | None:
+    """GPS time of a --start/--end value: a UTC one (``Z``, an offset, or ``--time-scale utc``) plus the
+    GPS-UTC leap seconds in force then (:data:`overbound.io.gpstime.GPS_UTC_LEAP_SECONDS`)."""
+    if value is None:
+        return None
+    t, utc = value
+    if utc or scale == "utc":
+        from overbound.io.gpstime import gps_utc_offset
+
+        return t + datetime.timedelta(seconds=gps_utc_offset(t))
+    return t
+
+
 _input_options = [
     click.option(
         "--reference",
         "reference",
-        metavar="LAT,LON,H",
-        help="True antenna position, geodetic WGS-84 (deg, deg, ellipsoidal m).",
+        metavar="LAT,LON,H|mean",
+        help="True antenna position, geodetic WGS-84 (deg, deg, ellipsoidal m), e.g. "
+        "35.3118,-120.6611,134.64; 'mean': a static receiver without a surveyed position, errors against "
+        "the mean of its own positions (the report says so first).",
     ),
     click.option(
         "--reference-ecef", "reference_ecef", metavar="X,Y,Z", help="True antenna position, ECEF (m)."
@@ -132,12 +171,20 @@ _input_options = [
     click.option("--strict", is_flag=True, help="Stop at the first malformed row instead of counting it."),
     click.option(
         "--start",
-        type=click.DateTime(_TIME_FORMATS),
-        metavar="GPST",
-        help="Keep epochs from this GPS time on (ISO 8601, e.g. 2024-01-07T06:00:00).",
+        type=_Instant(),
+        metavar="TIME",
+        help="Keep epochs from this time on: ISO 8601, GPS time unless --time-scale utc, a trailing Z or an "
+        "offset, e.g. 2024-01-07T06:00:00, '2024-01-07 06:00:00Z', 2024-01-07T08:00:00+02:00.",
     ),
+    click.option("--end", type=_Instant(), metavar="TIME", help="Keep epochs before this time (as --start)."),
     click.option(
-        "--end", type=click.DateTime(_TIME_FORMATS), metavar="GPST", help="Keep epochs before this GPS time."
+        "--time-scale",
+        "time_scale",
+        type=click.Choice(["gps", "utc"]),
+        default="gps",
+        show_default=True,
+        help="Time scale of --start/--end without Z or offset; UTC is converted to GPS time with the "
+        "leap seconds in force then.",
     ),
     click.option(
         "--column",
@@ -176,7 +223,9 @@ def _with_input_options(f):
     return f
 
 
-def _read_options(reference, reference_ecef, fmt, station, strict, start, end, column_map) -> dict:
+def _read_options(
+    reference, reference_ecef, fmt, station, strict, start, end, column_map, time_scale="gps"
+) -> dict:
     """Keyword arguments of :func:`overbound.io.read` from the shared input options."""
     mapping = {}
     for item in column_map:
@@ -190,7 +239,7 @@ def _read_options(reference, reference_ecef, fmt, station, strict, start, end, c
         "station": station,
         "strict": strict,
         "mapping": mapping or None,
-        "time_range": (start, end) if start or end else None,
+        "time_range": (_gps_time(start, time_scale), _gps_time(end, time_scale)) if start or end else None,
     }
 
 
@@ -408,6 +457,14 @@ def _run_analysis(
             **(campaign or {}),
         )
         out_dir.mkdir(parents=True, exist_ok=True)  # a demo's subdirectory
+        if result.pl_only is not None:
+            if epochs_out:
+                from overbound.io.dataset import NO_TRUTH_TABLE
+
+                raise InputError(
+                    ", ".join(r.source for r in result.reports), NO_TRUTH_TABLE + " (no --epochs)"
+                )
+            return _write_pl_only(result, out_dir, inputs, read_opts, step)
         for c in result.confidence:
             write_confidence(c, out_dir / json_name(c.axis))
         for e in result.evt:
@@ -438,6 +495,52 @@ def _run_analysis(
     return summary, report, assessment
 
 
+def _with_truth(table, reports):
+    """``table``, or an :class:`InputError` when an input has no truth: the methods need errors."""
+    if any(not r.truth for r in reports):
+        from overbound.methods.protection_levels import NO_TRUTH
+
+        source = ", ".join(r.source for r in reports if not r.truth)
+        why = "this method needs them ('overbound analyze' gives what the protection levels alone give)"
+        raise InputError(source, f"{NO_TRUTH}: {why}")
+    return table
+
+
+def _write_pl_only(result, out_dir: Path, inputs, read_opts: dict, step):
+    """summary.json and report.html of inputs without truth (:mod:`overbound.report.pl_only`)."""
+    from overbound.jsontext import dumps
+    from overbound.report.json import provenance_dict
+    from overbound.report.pl_only import pl_only_dict, write_pl_only_report
+
+    step("writing summary.json")
+    options = {k: v for k, v in read_opts.items() if v is not None}
+    doc = pl_only_dict(result, provenance_dict(inputs, ["overbound", *sys.argv[1:]], options))
+    summary = out_dir / "summary.json"
+    summary.write_text(dumps(doc), encoding="utf-8")
+    step("drawing report.html")
+    report = write_pl_only_report(result, out_dir / "report.html", doc)
+    e = doc["epochs"]
+    console.print(
+        f"[bold]{result.title}[/]: {e['total']} epochs, {e['with_pl']} with protection levels, "
+        f"{e['rejected']} rejected",
+        highlight=False,
+        soft_wrap=True,
+    )
+    for w in result.warnings:
+        console.print(f"[bold yellow]warning:[/] {w}", highlight=False, soft_wrap=True)
+    t = Table("flight", "epochs", "with PL", "HPL 95 %", "VPL 95 %", *doc["services"])
+    for name, st in doc["stations"].items():
+        avail = [_fmt(st["services"][s]["availability"]["combined"], True) for s in doc["services"]]
+        pls = (_fmt_m(st["hpl"]["p95"]), _fmt_m(st["vpl"]["p95"]))
+        t.add_row(name, str(st["epochs"]), str(st["with_pl"]), *pls, *avail)
+    console.print(t)
+    return summary, report, None
+
+
+def _fmt_m(x: float | None) -> str:
+    return "n/a" if x is None else f"{x:.1f} m"
+
+
 def _fmt(x: float | None, pct: bool = False) -> str:
     """A share as a percentage, or a probability (``< 1e-15`` below that, :mod:`overbound.numbers`)."""
     from overbound.numbers import format_probability
@@ -456,6 +559,8 @@ def _print_summary(result, assessment) -> None:
         f"HPE95 {_fmt(c.hpe95)} m, |VPE|95 {_fmt(c.vpe95)} m",
         highlight=False,
     )
+    for w in result.warnings:
+        console.print(f"[bold yellow]warning:[/] {w}", highlight=False, soft_wrap=True)
     t = Table(
         "service", "HAL/VAL", "avail. H", "avail. V", "avail. H+V", "cont. risk H+V", "MI H/V", "HMI H/V"
     )
@@ -682,6 +787,10 @@ def convert(source, out, **inputs_opts) -> None:
     read_options = _read_options(**inputs_opts)
     with staged_files(out) as staged:
         table, report = read(source, **read_options)
+        if not report.truth:
+            from overbound.io.dataset import NO_TRUTH_TABLE
+
+            raise InputError(report.source, NO_TRUTH_TABLE)
         write_epochs(table, staged, report=report)
     click.echo(f"{out}: {_read_line(report)}")
 
@@ -760,7 +869,7 @@ def confidence(
     read_options = _read_options(**inputs_opts)
     with _staged(out_dir, "confidence") as stage, _progress() as bar:
         bar.add_task(f"{axis} PL confidence level", total=None)
-        table, _ = load_epochs(list(inputs), columns=("east", "north", "alert"), **read_options)
+        table = _with_truth(*load_epochs(list(inputs), columns=("east", "north", "alert"), **read_options))
         run = run_confidence(
             table,
             stage.path,
@@ -878,7 +987,7 @@ def evt(
     read_options = _read_options(**inputs_opts)
     with _staged(out_dir, "evt") as stage, _progress() as bar:
         bar.add_task(f"{axis} EVT tail extrapolation", total=None)
-        table, _ = load_epochs(list(inputs), columns=("alert",), **read_options)
+        table = _with_truth(*load_epochs(list(inputs), columns=("alert",), **read_options))
         run = run_evt(
             table,
             stage.path,
@@ -944,7 +1053,7 @@ def parametric(inputs, out_dir, services, decorrelation, confidence, **inputs_op
             analysis = campaign_parametric(partitions_in(inputs[0]), **options)
             run = write_parametric_run(analysis, stage.path)
         else:
-            table, _ = load_epochs(list(inputs), columns=("alert",), **read_options)
+            table = _with_truth(*load_epochs(list(inputs), columns=("alert",), **read_options))
             run = run_parametric(table, stage.path, **options)
     for line in _parametric_lines(run.analysis):
         console.print(line, highlight=False, soft_wrap=True)

@@ -58,5 +58,7 @@ def test_cases_are_reproducible_and_cover_every_mutation() -> None:
     assert (a.data, a.filename, a.detail) == (b.data, b.filename, b.detail)
     assert fz.make_case(SEED + 1, 123).data != a.data
     seen = {fz.make_case(SEED, i).mutation for i in range(len(fz.TARGETS) * 40)}
-    generic = {n.replace("frame_", "line_").replace("token_", "line_") for n in seen}
+    generic = {
+        n.replace("frame_", "line_").replace("token_", "line_").replace("block_", "line_") for n in seen
+    }
     assert set(fz.MUTATIONS) <= generic, f"never drawn: {sorted(set(fz.MUTATIONS) - generic)}"

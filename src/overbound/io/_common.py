@@ -54,6 +54,7 @@ def finalize_epochs(
     *,
     format: str,
     notes: tuple[str, ...] = (),
+    errors: bool = True,
 ) -> tuple[pl.DataFrame, ReadReport]:
     """Apply the row rules common to all readers and build the report.
 
@@ -76,10 +77,13 @@ def finalize_epochs(
        ``invalidated`` as ``nan_pl``, ``negative_pl`` or ``nan_error``.
        Rows whose errors *and* PLs are all NaN are no-solution epochs already and are
        not counted.
+       With ``errors=False`` (an input without truth: the errors are all NaN, the PLs alone are
+       analysed) a NaN error is no reason: only the PLs are checked, and the report says ``truth``
+       false.
     """
     df = _drop_implausible_times(df, log)
     df = _drop_duplicates_or_raise(df, log)
-    df, invalid = _invalidate(df, log)
+    df, invalid = _invalidate(df, log, errors)
     cols = [c.name for c in COLUMNS if c.name in df.columns]
     out = df.select([pl.col(c).cast(_DTYPES[c]) for c in cols])
     report = ReadReport(
@@ -91,6 +95,7 @@ def finalize_epochs(
         invalidated=invalid,
         first_bad=log.first_bad,
         notes=notes,
+        truth=errors,
     )
     return out, report
 
@@ -155,13 +160,14 @@ def _drop_duplicates_or_raise(df: pl.DataFrame, log: RowLog) -> pl.DataFrame:
     return df.filter(pl.Series(keep)) if dup.size else df
 
 
-def _invalidate(df: pl.DataFrame, log: RowLog) -> tuple[pl.DataFrame, dict[str, int]]:
+def _invalidate(df: pl.DataFrame, log: RowLog, errors: bool = True) -> tuple[pl.DataFrame, dict[str, int]]:
     # An infinite value is no measurement either (an infinite error beside a finite PL would be an HMI).
-    missing = [(~pl.col(c).is_finite()).fill_null(True) for c in ("hpl", "vpl", "hpe", "vpe")]
-    all_nan = pl.all_horizontal([pl.col(c).is_nan().fill_null(True) for c in ("hpl", "vpl", "hpe", "vpe")])
+    checked = ("hpl", "vpl", "hpe", "vpe") if errors else ("hpl", "vpl")
+    missing = [(~pl.col(c).is_finite()).fill_null(True) for c in checked]
+    all_nan = pl.all_horizontal([pl.col(c).is_nan().fill_null(True) for c in checked])
     neg = pl.any_horizontal([(pl.col(c) < 0).fill_null(False) for c in ("hpl", "vpl")])
     nan_pl = pl.any_horizontal(missing[:2])
-    nan_err = pl.any_horizontal(missing[2:])
+    nan_err = pl.any_horizontal(missing[2:]) if errors else pl.lit(False)
     invalid = ~all_nan & (neg | nan_pl | nan_err)
     # One boolean pass over the table; reasons are spelled out only for the (few) bad rows.
     if not df.select(invalid.any()).item():

@@ -36,7 +36,7 @@ from pathlib import Path
 import polars as pl
 
 from overbound import __version__
-from overbound.io.geodesy import Reference
+from overbound.io.geodesy import MeanPosition, Reference
 from overbound.io.schema import InputError, ReadReport, validate_epochs
 
 __all__ = [
@@ -64,6 +64,11 @@ __all__ = [
 #: (18.7 GiB zstd, 21.5 GB LZ4, which no longer fits beside the workers), counting 85 s zstd,
 #: 199 s LZ4, and the full analysis 1630 s against 1825 s.
 PARTITION_COMPRESSION = "zstd"
+#: Why an input without truth is not written as an epoch table (ingest, convert).
+NO_TRUTH_TABLE = (
+    "no truth (errors unknown): an epoch table holds errors, so it is analysed directly "
+    "('overbound analyze FILE...'), not ingested or converted"
+)
 #: The manifest's file name inside a dataset.
 MANIFEST = "dataset.json"
 #: The manifest's schema name.
@@ -176,7 +181,7 @@ def ingest(
     dataset: str | Path,
     sources: Sequence,
     *,
-    reference: Reference | None = None,
+    reference: Reference | MeanPosition | None = None,
     read: Callable | None = None,
     **read_options,
 ) -> IngestResult:
@@ -212,6 +217,8 @@ def ingest(
     tables, reports = [], []
     for src in sources:
         t, r = reader(src, reference=reference, **read_options)
+        if not r.truth:  # NaN errors would read back as no-solution epochs: the PLs would be lost
+            raise InputError(r.source, NO_TRUTH_TABLE)
         tables.append(t)
         reports.append(r)
     if not tables:
@@ -272,11 +279,13 @@ def write_partition(
     return p
 
 
-def _record(manifest: dict, reports, written, reference: Reference | None, table: pl.DataFrame) -> None:
+def _record(
+    manifest: dict, reports, written, reference: Reference | MeanPosition | None, table: pl.DataFrame
+) -> None:
     stations = manifest.setdefault("stations", {})
     for name in table["station"].unique().sort().to_list():
         entry = stations.setdefault(name, {"reference": None})
-        if reference is not None:
+        if isinstance(reference, Reference):  # not the mean position: each input's own, in its notes
             entry["reference"] = [reference.lat_deg, reference.lon_deg, reference.height_m]
     manifest.setdefault("inputs", []).append(
         {

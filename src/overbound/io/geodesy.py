@@ -10,7 +10,18 @@ from dataclasses import dataclass
 import numpy as np
 import pymap3d
 
-__all__ = ["Reference", "enu_errors_ecef", "enu_errors_geodetic"]
+from overbound.io.schema import InputError
+
+__all__ = [
+    "MEAN_POSITION",
+    "MeanPosition",
+    "Reference",
+    "enu_errors_ecef",
+    "enu_errors_geodetic",
+    "reference_text",
+    "resolve",
+    "resolve_geodetic",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -57,6 +68,66 @@ class Reference:
         return f"{self.lat_deg:.9f},{self.lon_deg:.9f},{self.height_m:.4f}"
 
 
+@dataclass(frozen=True, slots=True)
+class MeanPosition:
+    """No truth: the errors are taken against the mean of the receiver's own positions (``--reference
+    mean``, a static receiver without a surveyed position). They then show the scatter of the solution
+    about its mean, not its bias: a constant error of the receiver is invisible, and the HPE and VPE
+    are a lower bound of the true errors. The mean is the ECEF mean of the positions given that are
+    finite (and ``use``, when the reader says which are solutions); its geodetic value is what
+    :func:`resolve` returns and the readers note."""
+
+    def __str__(self) -> str:
+        return "mean of the receiver's own positions"
+
+
+#: The one :class:`MeanPosition` (``reference=MEAN_POSITION``).
+MEAN_POSITION = MeanPosition()
+
+
+def resolve(
+    reference: Reference | MeanPosition,
+    x: np.ndarray,
+    y: np.ndarray,
+    z: np.ndarray,
+    use: np.ndarray | None = None,
+    source: str = "<positions>",
+) -> Reference:
+    """``reference`` itself, or for :data:`MEAN_POSITION` the mean of the ECEF positions ``x``, ``y``,
+    ``z`` (m) that are finite and ``use`` (:class:`InputError` naming ``source`` when none is)."""
+    if isinstance(reference, Reference):
+        return reference
+    xyz = np.column_stack([np.asarray(v, float) for v in (x, y, z)])
+    ok = np.isfinite(xyz).all(axis=1) & (True if use is None else np.asarray(use, bool))
+    if not ok.any():
+        raise InputError(source, "reference mean: no position to average (no epoch with a solution)")
+    mx, my, mz = (float(v) for v in xyz[ok].mean(axis=0))
+    lat, lon, h = pymap3d.ecef2geodetic(mx, my, mz)
+    return Reference(float(lat), float(lon), float(h))
+
+
+def resolve_geodetic(
+    reference: Reference | MeanPosition,
+    lat_deg: np.ndarray,
+    lon_deg: np.ndarray,
+    height_m: np.ndarray,
+    use: np.ndarray | None = None,
+    source: str = "<positions>",
+) -> Reference:
+    """:func:`resolve` of geodetic positions (deg, deg, ellipsoidal m)."""
+    if isinstance(reference, Reference):
+        return reference
+    return resolve(reference, *pymap3d.geodetic2ecef(lat_deg, lon_deg, height_m), use, source)
+
+
+def reference_text(asked: Reference | MeanPosition, used: Reference) -> str:
+    """How a reader names the reference its errors are against: ``used``, and for
+    :data:`MEAN_POSITION` that it is the mean of the receiver's own positions, not truth."""
+    if isinstance(asked, MeanPosition):
+        return f"{used} (the mean of the receiver's own positions, not truth)"
+    return str(used)
+
+
 def _three_floats(text: str, what: str) -> tuple[float, float, float]:
     parts = text.replace(" ", "").split(",")
     try:
@@ -69,9 +140,14 @@ def _three_floats(text: str, what: str) -> tuple[float, float, float]:
 
 
 def enu_errors_geodetic(
-    lat_deg: np.ndarray, lon_deg: np.ndarray, height_m: np.ndarray, ref: Reference
+    lat_deg: np.ndarray,
+    lon_deg: np.ndarray,
+    height_m: np.ndarray,
+    ref: Reference | MeanPosition,
+    use: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """East, north, up errors (estimate minus truth) of geodetic positions."""
+    """East, north, up errors (estimate minus truth) of geodetic positions (``ref``: see :func:`resolve`)."""
+    ref = resolve_geodetic(ref, lat_deg, lon_deg, height_m, use)
     e, n, u = pymap3d.geodetic2enu(
         np.asarray(lat_deg, float),
         np.asarray(lon_deg, float),
@@ -84,9 +160,10 @@ def enu_errors_geodetic(
 
 
 def enu_errors_ecef(
-    x: np.ndarray, y: np.ndarray, z: np.ndarray, ref: Reference
+    x: np.ndarray, y: np.ndarray, z: np.ndarray, ref: Reference | MeanPosition, use: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """East, north, up errors (estimate minus truth) of ECEF positions."""
+    """East, north, up errors (estimate minus truth) of ECEF positions (``ref``: see :func:`resolve`)."""
+    ref = resolve(ref, x, y, z, use)
     e, n, u = pymap3d.ecef2enu(
         np.asarray(x, float),
         np.asarray(y, float),

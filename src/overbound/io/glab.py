@@ -24,7 +24,7 @@ import numpy as np
 import polars as pl
 
 from overbound.io._common import RowLog, finalize_epochs
-from overbound.io.geodesy import Reference, enu_errors_ecef
+from overbound.io.geodesy import MeanPosition, Reference, enu_errors_ecef, reference_text, resolve
 from overbound.io.gpstime import PLAUSIBLE_SPAN, PLAUSIBLE_YEARS
 from overbound.io.open import open_text, source_name
 from overbound.io.schema import InputError, ReadReport
@@ -541,7 +541,7 @@ def _errors(
     solved: pl.DataFrame,
     numbered: pl.DataFrame,
     apriori: _Apriori | None,
-    reference: Reference | None,
+    reference: Reference | MeanPosition | None,
     name: str,
 ) -> tuple[pl.DataFrame, str]:
     """Errors from SBASOUT (differences to gLAB's a priori position) or recomputed against ``reference``."""
@@ -557,7 +557,11 @@ def _errors(
         return solved, f"errors: SBASOUT north/east/up differences to gLAB's a priori position {where}"
     output = numbered.filter(pl.col("text").str.starts_with("OUTPUT"))
     if output.height:
-        return _recompute(solved, output, reference)
+        return _recompute(solved, output, reference, name)
+    if isinstance(reference, MeanPosition):
+        raise InputError(
+            name, "reference mean needs the OUTPUT lines' positions; rerun gLAB with -print:output"
+        )
     if apriori is None or apriori.xyz is None or apriori.computed:
         raise InputError(
             name,
@@ -578,7 +582,9 @@ def _errors(
     )
 
 
-def _recompute(solved: pl.DataFrame, output: pl.DataFrame, reference: Reference) -> tuple[pl.DataFrame, str]:
+def _recompute(
+    solved: pl.DataFrame, output: pl.DataFrame, reference: Reference | MeanPosition, name: str
+) -> tuple[pl.DataFrame, str]:
     tok = output.select(pl.col("text").str.extract_all(r"\S+").alias("tok"))["tok"]
     v6 = tok.list.get(4, null_on_oob=True).str.contains(":").fill_null(False)
     cols = {}
@@ -612,12 +618,9 @@ def _recompute(solved: pl.DataFrame, output: pl.DataFrame, reference: Reference)
         .unique(subset="time", keep="first", maintain_order=True)
     )
     joined = solved.join(out, on="time", how="left", maintain_order="left")
-    e, n, u = enu_errors_ecef(
-        joined["x"].fill_null(np.nan).to_numpy(),
-        joined["y"].fill_null(np.nan).to_numpy(),
-        joined["z"].fill_null(np.nan).to_numpy(),
-        reference,
-    )
+    xyz = [joined[c].fill_null(np.nan).to_numpy() for c in ("x", "y", "z")]
+    used = resolve(reference, *xyz, None, name)
+    e, n, u = enu_errors_ecef(*xyz, used)
     joined = joined.with_columns(
         pl.Series("east", e),
         pl.Series("north", n),
@@ -626,7 +629,8 @@ def _recompute(solved: pl.DataFrame, output: pl.DataFrame, reference: Reference)
     ).drop("x", "y", "z")
     missing = int(np.isnan(e).sum())
     note = (
-        f"errors: recomputed against reference {reference} from the OUTPUT lines' estimated ECEF position "
+        f"errors: recomputed against reference {reference_text(reference, used)} from the OUTPUT lines' "
+        "estimated ECEF position "
         "(fields 12-14; 6-8 in the v5 layout), not the SBASOUT differences to gLAB's a priori position"
     )
     if missing:

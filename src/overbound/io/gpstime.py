@@ -16,6 +16,7 @@ __all__ = [
     "PLAUSIBLE_START_US",
     "PLAUSIBLE_YEARS",
     "gps_utc_offset",
+    "gpst_to_utc",
     "leap_seconds",
     "plausible_us",
     "utc_to_gpst",
@@ -105,3 +106,13 @@ def utc_to_gpst(utc: pl.Series) -> pl.Series:
     t = utc.dt.epoch("us").to_numpy()
     us = t + leap_seconds(t) * _US
     return pl.from_epoch(pl.Series(utc.name, us), time_unit="us").cast(pl.Datetime("us"))
+
+
+def gpst_to_utc(gpst: dt.datetime) -> dt.datetime:
+    """GPS time -> UTC: GPST - (GPS-UTC), the leap seconds in force at that UTC time.
+
+    >>> gpst_to_utc(dt.datetime(2017, 1, 1, 0, 0, 18)), gpst_to_utc(dt.datetime(2006, 12, 27, 0, 0, 14))
+    (datetime.datetime(2017, 1, 1, 0, 0), datetime.datetime(2006, 12, 27, 0, 0))
+    """
+    utc = gpst - dt.timedelta(seconds=gps_utc_offset(gpst))
+    return gpst - dt.timedelta(seconds=gps_utc_offset(utc))  # the offset of the UTC time itself

@@ -12,6 +12,7 @@ import datetime as dt
 import gzip
 import io
 import re
+import zipfile
 import zlib
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
@@ -20,7 +21,7 @@ from typing import BinaryIO, TextIO
 import polars as pl
 
 from overbound.io.dataset import is_dataset, read_dataset
-from overbound.io.geodesy import Reference
+from overbound.io.geodesy import MeanPosition, Reference
 from overbound.io.schema import REQUIRED, InputError, ReadReport
 
 __all__ = ["FORMATS", "Source", "open_binary", "open_text", "read", "read_bytes", "sniff", "source_name"]
@@ -28,7 +29,7 @@ __all__ = ["FORMATS", "Source", "open_binary", "open_text", "read", "read_bytes"
 Source = str | Path | TextIO | BinaryIO
 
 #: Format names accepted by ``format=`` / ``--format``.
-FORMATS: tuple[str, ...] = ("parquet", "csv", "rtklib-pos", "glab", "ubx")
+FORMATS: tuple[str, ...] = ("parquet", "csv", "rtklib-pos", "glab", "ubx", "g1000", "sbf", "nmea")
 
 _GZIP = b"\x1f\x8b"
 _RTKLIB_DATA = re.compile(rb"^\s*\d{4}/\d{2}/\d{2}\s+\d{2}:\d{2}:\d{2}(\.\d+)?\s")
@@ -99,6 +100,36 @@ def open_text(source: Source) -> TextIO:
     return io.TextIOWrapper(open_binary(source), encoding="utf-8", errors="replace", newline=None)
 
 
+_ZIP = b"PK\x03\x04"
+
+
+def expand_archives(sources: Sequence[Source]) -> list[Source]:
+    """``sources`` with every zip archive (a path whose content is one) replaced by its member files,
+    in archive order, each an in-memory stream named ``archive.zip/member``: a zip of three flights
+    is three inputs, not one file. Folders, ``__MACOSX/`` entries and hidden files are not members."""
+    out: list[Source] = []
+    for src in sources:
+        if not isinstance(src, str | Path) or not Path(src).is_file():
+            out.append(src)
+            continue
+        with Path(src).open("rb") as f:
+            if f.read(4) != _ZIP:
+                out.append(src)
+                continue
+        try:
+            with zipfile.ZipFile(src) as archive:
+                for info in archive.infolist():
+                    base = info.filename.rsplit("/", 1)[-1]
+                    # not data: folders, macOS resource forks (__MACOSX/, ._name) and other hidden files
+                    if not info.is_dir() and not info.filename.startswith("__MACOSX/") and base[:1] != ".":
+                        member = io.BytesIO(archive.read(info))
+                        member.name = f"{src}/{info.filename}"  # type: ignore[attr-defined]
+                        out.append(member)
+        except (zipfile.BadZipFile, OSError) as exc:
+            raise InputError(str(src), f"unreadable zip archive: {exc}") from None
+    return out
+
+
 def read_bytes(source: Source) -> bytes:
     """All bytes of ``source`` (gunzipped if needed); a file opened here is closed, a stream is left open."""
     stream = open_binary(source)
@@ -141,6 +172,12 @@ def sniff(source: Source) -> str:
         return "parquet"
     if _looks_ubx(head):
         return "ubx"
+    if head.startswith(b"#airframe_info"):
+        return "g1000"
+    from overbound.io.sbf import looks_sbf  # lazy: pysbf2 loads with the reader
+
+    if looks_sbf(head):
+        return "sbf"
     lines = [ln for ln in head.splitlines()[:200] if ln.strip()]
     if any(
         ln.startswith((b"SBASOUT", b"SBASIONO", b"SBASCORR", b"SBASVAR", b"SBASUNSEL")) for ln in lines
@@ -150,6 +187,10 @@ def sniff(source: Source) -> str:
         _RTKLIB_DATA.match(ln) for ln in lines[:50]
     ):
         return "rtklib-pos"
+    from overbound.io.nmea import looks_nmea  # lazy: pynmeagps loads with the reader
+
+    if looks_nmea([ln.strip() for ln in lines]):
+        return "nmea"
     first = lines[0] if lines else b""
     if (b"," in first or b";" in first or b"\t" in first) and re.search(rb"[A-Za-z_]", first):
         return "csv"
@@ -175,8 +216,11 @@ def _looks_ubx(head: bytes) -> bool:
 
 def _readers() -> dict[str, Callable[..., tuple[pl.DataFrame, ReadReport]]]:
     # Imported lazily: a reader's optional heavy dependency loads only when it is used.
+    from overbound.io.g1000 import read_g1000
     from overbound.io.glab import read_glab
+    from overbound.io.nmea import read_nmea
     from overbound.io.rtklib import read_rtklib_pos
+    from overbound.io.sbf import read_sbf
     from overbound.io.table import read_csv, read_parquet
     from overbound.io.ubx import read_ubx
 
@@ -186,6 +230,9 @@ def _readers() -> dict[str, Callable[..., tuple[pl.DataFrame, ReadReport]]]:
         "rtklib-pos": read_rtklib_pos,
         "glab": read_glab,
         "ubx": read_ubx,
+        "g1000": read_g1000,
+        "sbf": read_sbf,
+        "nmea": read_nmea,
     }
 
 
@@ -193,7 +240,7 @@ def read(
     source: Source,
     *,
     format: str | None = None,
-    reference: Reference | None = None,
+    reference: Reference | MeanPosition | None = None,
     station: str | None = None,
     mapping: Mapping[str, str] | None = None,
     time_range: tuple[dt.datetime | None, dt.datetime | None] | None = None,
@@ -225,7 +272,7 @@ def read(
         table, report = read_dataset(source, columns=columns)
     else:
         table, report = _read_one(source, format, reference, station, strict, mapping, columns)
-    if columns is not None:
+    if columns is not None and report.truth:  # without truth: all (the PL-only analysis reports them)
         keep = set(REQUIRED) | set(columns)
         table = table.select([c for c in table.columns if c in keep])
     if time_range is not None:

@@ -31,7 +31,15 @@ import numpy as np
 import polars as pl
 
 from overbound.io._common import RowLog, finalize_epochs
-from overbound.io.geodesy import Reference, enu_errors_ecef, enu_errors_geodetic
+from overbound.io.geodesy import (
+    MeanPosition,
+    Reference,
+    enu_errors_ecef,
+    enu_errors_geodetic,
+    reference_text,
+    resolve,
+    resolve_geodetic,
+)
 from overbound.io.gpstime import (
     PLAUSIBLE_END_US,
     PLAUSIBLE_SPAN,
@@ -219,13 +227,14 @@ def read_rtklib_pos(
         notes.append(
             f"{header.time_system} times converted to GPST (GPS-UTC = {', '.join(map(str, offsets))} s)"
         )
-    east, north, up = _errors(good, header, reference, name)
+    solved = (good["_q"] != 0).to_numpy() if "_q" in good.columns else None
+    east, north, up, used = _errors(good, header, reference, name, solved)
 
     stn, how = _station(header, station, name)
     notes.append(f"station {stn} from {how}")
     if station is not None and station != stn:
         notes.append(f"station argument {station!r} ignored: the header names {stn}")
-    notes.append(f"reference {reference}")
+    notes.append(f"reference {reference_text(reference, used)}")
 
     q = good["_q"] if "_q" in good.columns else None
     none = (q == 0).to_numpy() if q is not None else np.zeros(good.height, dtype=bool)
@@ -467,16 +476,18 @@ def _parse_fields(raw: pl.DataFrame, header: PosHeader) -> pl.DataFrame:
 
 
 def _errors(
-    good: pl.DataFrame, header: PosHeader, reference: Reference, source: str
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    good: pl.DataFrame, header: PosHeader, reference: Reference | MeanPosition, source: str, solved
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, Reference]:
+    """East, north, up errors against ``reference`` (the mean of the ``solved`` epochs' positions for
+    :data:`~overbound.io.geodesy.MEAN_POSITION`), and the reference used."""
     if {"_x-ecef", "_y-ecef", "_z-ecef"} <= set(good.columns):
-        return enu_errors_ecef(
-            good["_x-ecef"].to_numpy(), good["_y-ecef"].to_numpy(), good["_z-ecef"].to_numpy(), reference
-        )
+        xyz = [good[c].to_numpy() for c in ("_x-ecef", "_y-ecef", "_z-ecef")]
+        ref = resolve(reference, *xyz, solved, source)
+        return (*enu_errors_ecef(*xyz, ref), ref)
     if {"_latitude", "_longitude", "_height"} <= set(good.columns):
-        return enu_errors_geodetic(
-            good["_latitude"].to_numpy(), good["_longitude"].to_numpy(), good["_height"].to_numpy(), reference
-        )
+        llh = [good[c].to_numpy() for c in ("_latitude", "_longitude", "_height")]
+        ref = resolve_geodetic(reference, *llh, solved, source)
+        return (*enu_errors_geodetic(*llh, ref), ref)
     raise InputError(
         source, "no position columns (latitude/longitude/height or x/y/z-ecef)", line=header.line
     )

@@ -74,6 +74,16 @@ COLUMNS: tuple[Column, ...] = (
         "receiver raised an integrity alert / flagged the solution unusable",
         False,
     ),
+    Column(
+        "hal",
+        pl.Float64(),
+        "m",
+        "horizontal alert limit in force, as the receiver logs it (NaN: none)",
+        False,
+    ),
+    Column(
+        "val", pl.Float64(), "m", "vertical alert limit in force, as the receiver logs it (NaN: none)", False
+    ),
 )
 REQUIRED: tuple[str, ...] = tuple(c.name for c in COLUMNS if c.required)
 OPTIONAL: tuple[str, ...] = tuple(c.name for c in COLUMNS if not c.required)
@@ -110,6 +120,8 @@ class ReadReport:
         was unusable (NaN or negative PL, NaN error), by reason. They count as unavailable.
     first_bad : ``"<line>: <reason>"`` of the first rejected or invalidated row, or ``""``.
     notes : free-form remarks (e.g. the reference position used).
+    truth : False when the input has no truth (a flight log without a reference trajectory): its
+        errors are unknown (NaN) beside valid protection levels, and only what the PLs give is analysed.
     """
 
     source: str
@@ -120,6 +132,7 @@ class ReadReport:
     invalidated: dict[str, int] = field(default_factory=dict)
     first_bad: str = ""
     notes: tuple[str, ...] = ()
+    truth: bool = True
 
     @property
     def n_rejected(self) -> int:
@@ -146,6 +159,7 @@ class ReadReport:
             "n_invalidated": sum(self.invalidated.values()),
             "first_bad": self.first_bad,
             "notes": list(self.notes),
+            **({} if self.truth else {"truth": False}),
         }
 
 

@@ -21,7 +21,13 @@ import polars as pl
 
 from overbound import __version__
 from overbound.io._common import RowLog, finalize_epochs
-from overbound.io.geodesy import Reference, enu_errors_geodetic
+from overbound.io.geodesy import (
+    MeanPosition,
+    Reference,
+    enu_errors_geodetic,
+    reference_text,
+    resolve_geodetic,
+)
 from overbound.io.open import Source, open_binary, source_name
 from overbound.io.schema import COLUMNS, REQUIRED, InputError, ReadReport, validate_epochs
 
@@ -373,7 +379,7 @@ def _to_epochs(
     lines: pl.Series,
     name: str,
     fmt: str,
-    reference: Reference | None,
+    reference: Reference | MeanPosition | None,
     station: str | None,
     strict: bool,
     mapping: Mapping[str, str] | None,
@@ -431,12 +437,14 @@ def _to_epochs(
     out: dict[str, pl.Series] = {"_line": line, "time": time.alias("time")}
     if pos_mode:
         assert reference is not None
-        e, n, u = enu_errors_geodetic(
-            p["lat"].to_numpy(), p["lon"].to_numpy(), p["height"].to_numpy(), reference
-        )
+        llh = [p[c].to_numpy() for c in ("lat", "lon", "height")]
+        solved = np.isfinite(p["hpl"].to_numpy()) if "hpl" in p else None
+        used = resolve_geodetic(reference, *llh, solved, name)
+        e, n, u = enu_errors_geodetic(*llh, used)
         p["east"], p["north"], p["vpe"] = pl.Series(e), pl.Series(n), pl.Series(u)
         p["hpe"] = pl.Series(np.hypot(e, n))
-        notes_l.append(f"errors computed from lat, lon, height against reference {reference}")
+        against = reference_text(reference, used)
+        notes_l.append(f"errors computed from lat, lon, height against reference {against}")
     elif "hpe" not in p:
         p["hpe"] = pl.Series(np.hypot(p["east"].to_numpy(), p["north"].to_numpy()))
         notes_l.append("hpe computed as hypot(east, north)")

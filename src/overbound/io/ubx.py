@@ -21,7 +21,13 @@ from pyubx2 import GET, VALNONE, UBXReader
 from pyubx2.exceptions import UBXMessageError, UBXParseError, UBXTypeError
 
 from overbound.io._common import RowLog, finalize_epochs
-from overbound.io.geodesy import Reference, enu_errors_geodetic
+from overbound.io.geodesy import (
+    MeanPosition,
+    Reference,
+    enu_errors_geodetic,
+    reference_text,
+    resolve_geodetic,
+)
 from overbound.io.gpstime import leap_seconds
 from overbound.io.open import read_bytes, source_name
 from overbound.io.schema import InputError, ReadReport
@@ -315,7 +321,7 @@ def _first(df: pl.DataFrame) -> pl.DataFrame:
 
 
 def _epochs(
-    tables: dict[str, pl.DataFrame], reference: Reference, name: str
+    tables: dict[str, pl.DataFrame], reference: Reference | MeanPosition, name: str
 ) -> tuple[pl.DataFrame, list[str]]:
     notes: list[str] = []
     pvt, hp = tables["NAV-PVT"], tables["NAV-HPPOSLLH"]
@@ -358,18 +364,15 @@ def _epochs(
         (has_pvt | use_hp).alias("positioned"),
         use_hp.alias("use_hp"),
     )
-    e, n, u = enu_errors_geodetic(
-        epochs["lat"].fill_null(np.nan).to_numpy(),
-        epochs["lon"].fill_null(np.nan).to_numpy(),
-        epochs["h"].fill_null(np.nan).to_numpy(),
-        reference,
-    )
     p1, p2, p3 = (epochs[c].cast(pl.Float64).to_numpy() / 1000.0 for c in ("plPos1", "plPos2", "plPos3"))
     hpl = np.where(epochs["plPosFrame"].to_numpy() == 3, p1, np.hypot(p1, p2))
     pl_valid = epochs["pl_valid"].to_numpy()
     positioned = epochs["positioned"].to_numpy()
     fixed = epochs["fix"].to_numpy()
     usable = pl_valid & (fixed | ~positioned)
+    llh = [epochs[c].fill_null(np.nan).to_numpy() for c in ("lat", "lon", "h")]
+    used = resolve_geodetic(reference, *llh, usable & positioned, name)
+    e, n, u = enu_errors_geodetic(*llh, used)
     nan = np.full(epochs.height, np.nan)
     out = (
         epochs.select(
@@ -393,7 +396,7 @@ def _epochs(
     n_hp = int(epochs["use_hp"].sum())
     notes.append(
         f"positions: NAV-HPPOSLLH for {n_hp} epochs, NAV-PVT for {int(positioned.sum()) - n_hp}; "
-        f"errors against reference {reference}"
+        f"errors against reference {reference_text(reference, used)}"
     )
     frames = Counter(epochs.filter(pl.col("pl_valid"))["plPosFrame"].to_list())
     if frames:

@@ -182,12 +182,11 @@ def summary_dict(
             },
             "verdicts": [dataclasses.asdict(v) for v in verdicts(analysis, s)],
         }
-    rejected = sum(r.n_rejected for r in analysis.reports)
-    invalidated = sum(sum(r.invalidated.values()) for r in analysis.reports)
     return {
         "schema": SCHEMA,
         "overbound_version": __version__,
         "title": analysis.title,
+        **({"warnings": list(analysis.warnings)} if analysis.warnings else {}),
         "inputs": [_input_dict(r) for r in analysis.reports],
         "verdicts": verdicts_dict(assessment.services) if assessment else {},
         "verdicts_by_station": (
@@ -198,8 +197,8 @@ def summary_dict(
             "total": c.n_total,
             "with_solution": c.n_with_solution,
             "no_solution": c.n_total - c.n_with_solution,
-            "rejected": rejected,
-            "invalidated": invalidated,
+            "rejected": analysis.n_rejected,
+            "invalidated": analysis.n_invalidated,
         },
         "time": {"start": c.start, "end": c.end, "stations": list(c.stations)},
         "accuracy": {"hpe95": c.hpe95, "vpe95": c.vpe95},

@@ -92,6 +92,7 @@ header{border-bottom:3px solid var(--accent);padding:28px 0 14px;margin-bottom:8
 .kicker{margin:0;color:var(--accent);font-weight:600;letter-spacing:.06em;text-transform:uppercase;font-size:.8rem}
 h1{margin:.15em 0 .1em;font-size:1.9rem;overflow-wrap:anywhere}
 .sub{margin:0 0 12px;color:var(--muted)}
+.warning{margin:8px 0;padding:8px 12px;border-left:4px solid #b45309;background:#fff7ed;color:#7c2d12}
 nav ul{list-style:none;margin:0;padding:0;display:flex;flex-wrap:wrap;gap:6px}
 nav a{display:inline-block;padding:3px 10px;border:1px solid var(--line);border-radius:14px;
 color:var(--accent);text-decoration:none;font-size:.85rem;background:var(--band)}
