@@ -451,7 +451,10 @@ def _field(kind: str):
 
 def _epoch(which: str):
     def mutate(data: bytes, rng: Rng, seed: Seed) -> tuple[bytes, str]:
-        matches = [m for p in _EPOCH_RE.get(seed.target, ()) for m in p.finditer(data)]
+        need = ("year", "week") if which == "year" else ("hour", "sod", "tow")
+        # the patterns with the field to change (NMEA: the year is in RMC only, the hour in GFA too)
+        patterns = [p for p in _EPOCH_RE.get(seed.target, ()) if any(k in p.groupindex for k in need)]
+        matches = [m for p in patterns for m in p.finditer(data)]
         if not matches:
             data, what = m_digit_change(data, rng, seed)
             return data, f"no epoch line; {what}"

@@ -99,3 +99,13 @@ def test_strict_and_missing_date():
         read_nmea(io.BytesIO(text), reference=TRUTH)
     with pytest.raises(InputError, match="NMEA logs hold positions"):
         read_nmea(GFA)
+
+
+def test_corrupt_address_is_a_counted_rejection():
+    """A talker pynmeagps cannot read gives it no message (fuzz case 811): rejected, not a traceback."""
+    lines = gzip.decompress(GFA.read_bytes()).splitlines()
+    k = next(i for i, ln in enumerate(lines) if ln.startswith(b"$GNGFA"))
+    lines[k] = b"$G\xffGFA" + lines[k][6:]
+    _, report = read_nmea(io.BytesIO(b"\n".join(lines)), reference=TRUTH)
+    assert report.rejected == {"bad_sentence": 2} and report.rows_kept == 598 and report.unaccounted == 0
+    assert "undecodable address" in report.first_bad

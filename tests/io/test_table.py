@@ -215,6 +215,7 @@ def test_station_column_argument_and_stem(tmp_path: Path) -> None:
     table, report = _csv(text, station="B")
     assert table["station"].cast(pl.String).to_list() == ["A", "B"]
     assert "1 empty station cells set to B from the station argument" in report.notes
+    assert "station argument 'B' not used where the station column names A" in report.notes
     path = tmp_path / "site42.epochs.csv.gz"
     path.write_bytes(gzip.compress(BASE.encode()))
     assert read_csv(path)[0]["station"][0] == "site42"

@@ -19,6 +19,7 @@ __all__ = [
     "gpst_to_utc",
     "leap_seconds",
     "plausible_us",
+    "utc_iso",
     "utc_to_gpst",
 ]
 
@@ -116,3 +117,14 @@ def gpst_to_utc(gpst: dt.datetime) -> dt.datetime:
     """
     utc = gpst - dt.timedelta(seconds=gps_utc_offset(gpst))
     return gpst - dt.timedelta(seconds=gps_utc_offset(utc))  # the offset of the UTC time itself
+
+
+def utc_iso(gpst_iso: str | None) -> str | None:
+    """An ISO 8601 GPS time as UTC, to the second with a trailing ``Z`` (None stays None).
+
+    >>> utc_iso("2017-01-01T00:00:18.000")
+    '2017-01-01T00:00:00Z'
+    """
+    if gpst_iso is None:
+        return None
+    return gpst_to_utc(dt.datetime.fromisoformat(gpst_iso)).isoformat(timespec="seconds") + "Z"

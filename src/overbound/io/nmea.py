@@ -121,6 +121,9 @@ def _sentence(text: bytes, line: int, log: RowLog, found: dict) -> str | None:
     except (NMEAParseError, NMEAMessageError, NMEATypeError, ValueError) as exc:
         log.reject(line, f"bad sentence: {exc}")
         return None
+    if msg is None:  # pynmeagps gives no message for an address it cannot read (a corrupt talker)
+        log.reject(line, f"bad sentence: undecodable address {text[1:6]!r}")
+        return None
     if kind == "RMC" and isinstance(getattr(msg, "date", None), dt.date):
         found["DATE"].append((line, msg.date))
     elif kind == "ZDA" and all(

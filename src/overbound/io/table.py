@@ -453,6 +453,10 @@ def _to_epochs(
         st = p["station"].fill_null(fallback)
         if p["station"].null_count():
             notes_l.append(f"{p['station'].null_count()} empty station cells set to {fallback} from {how}")
+        named = sorted(set(p["station"].drop_nulls().cast(pl.String).to_list()) - {station})
+        if station is not None and named:  # said, not silent: the file's own names win over the argument
+            shown = ", ".join(named[:5]) + (f" and {len(named) - 5} more" if len(named) > 5 else "")
+            notes_l.append(f"station argument {station!r} not used where the station column names {shown}")
     else:
         st = pl.Series([fallback] * len(line), dtype=pl.String)
         notes_l.append(f"station {fallback} from {how}")

@@ -23,6 +23,7 @@ import numpy as np
 
 from overbound import __version__
 from overbound.analysis import Analysis, Verdict, verdicts
+from overbound.io.gpstime import utc_iso
 from overbound.methods.counting import (
     AXES,
     SAFETY_PERCENTILES,
@@ -318,6 +319,7 @@ def _overview(a: Analysis) -> str:
             "Time span (GPS)",
             f"{_e(c.start or 'n.a.')} – {_e(c.end or 'n.a.')} ({_e(_duration(c.start, c.end))})",
         ),
+        ("Time span (UTC)", f"{_e(utc_iso(c.start) or 'n.a.')} – {_e(utc_iso(c.end) or 'n.a.')}"),
         (f"Station{'s' if len(c.stations) != 1 else ''}", _e(", ".join(c.stations) or "none")),
         ("Epochs", f"{c.n_total:,}"),
         ("with a solution", f"{c.n_with_solution:,} ({format_share(c.n_with_solution, c.n_total)})"),

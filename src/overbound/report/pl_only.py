@@ -9,14 +9,13 @@ series of every flight and the pooled PL distributions.
 
 from __future__ import annotations
 
-import datetime as dt
 from pathlib import Path
 
 import numpy as np
 import polars as pl
 
 from overbound import __version__
-from overbound.io.gpstime import gpst_to_utc
+from overbound.io.gpstime import utc_iso
 from overbound.methods.counting import CountingResult
 from overbound.methods.protection_levels import PlDistribution
 from overbound.report.json import _continuity, _input_dict
@@ -30,12 +29,6 @@ SCHEMA = "overbound.pl-summary/1"
 _AXES = ("horizontal", "vertical", "combined")
 
 
-def _utc(gpst: str | None) -> str | None:
-    if gpst is None:
-        return None
-    return gpst_to_utc(dt.datetime.fromisoformat(gpst)).isoformat(timespec="seconds") + "Z"
-
-
 def _distribution(d: PlDistribution) -> dict:
     return {
         "epochs": d.n_epochs,
@@ -43,8 +36,8 @@ def _distribution(d: PlDistribution) -> dict:
         "time": {
             "start_gpst": d.start,
             "end_gpst": d.end,
-            "start_utc": _utc(d.start),
-            "end_utc": _utc(d.end),
+            "start_utc": utc_iso(d.start),
+            "end_utc": utc_iso(d.end),
         },
         "hpl": d.hpl,
         "vpl": d.vpl,
