@@ -81,8 +81,9 @@ TARGETS: tuple[str, ...] = (
     "g1000",
     "sbf",
     "nmea",
+    "sbp",
 )
-EPOCH_TARGETS = ("rtklib-pos", "glab", "ubx", "csv", "parquet", "g1000", "sbf", "nmea")
+EPOCH_TARGETS = ("rtklib-pos", "glab", "ubx", "csv", "parquet", "g1000", "sbf", "nmea", "sbp")
 OUTCOMES = ("ok", "clean_error", "unnamed_error", "traceback", "unbalanced", "hang", "memory", "crash")
 ACCEPTABLE = ("ok", "clean_error")
 
@@ -91,7 +92,9 @@ RTKLIB_REFERENCE = "35.311803,-120.661092,134.6419"
 UBX_REFERENCE = "43.5607,1.4809,207.0"
 SBF_REFERENCE = "50.848642,4.732128,128.33"
 NMEA_REFERENCE = "50.848642,4.732128,128.33"
+SBP_REFERENCE = "37.83124,-122.28651,-17.40"
 _REFERENCES = {
+    "sbp": SBP_REFERENCE,
     "rtklib-pos": RTKLIB_REFERENCE,
     "ubx": UBX_REFERENCE,
     "sbf": SBF_REFERENCE,
@@ -182,8 +185,8 @@ def _cut(content: bytes, target: str, unit: str, limit: int) -> bytes:
     if unit == "frame":
         frames = [f for f in _ubx_frames(content) if f[1] <= limit and content[f[0] : f[0] + 2] == _UBX_SYNC]
         return content[: frames[-1][1]] if frames else content[:limit]
-    if unit == "block":
-        ends = [b for _, b in _sbf_blocks(content) if b <= limit]
+    if unit in ("block", "sbp"):
+        ends = [b for _, b in _binary_units(content, unit) if b <= limit]
         return content[: ends[-1]] if ends else content[:limit]
     sep = b"," if unit == "comma" else b"\n"
     head = content[: content.rfind(sep, 0, limit) + 1]
@@ -303,6 +306,7 @@ def load_seeds() -> dict[str, tuple[Seed, ...]]:
         _fixture("sbf", f"tests/data/sbf/{p.name}", "block") for p in sorted((DATA / "sbf").glob("*.gz"))
     ]
     seeds += [_fixture("nmea", f"tests/data/nmea/{p.name}") for p in sorted((DATA / "nmea").glob("*.gz"))]
+    seeds += [_fixture("sbp", f"tests/data/sbp/{p.name}", "sbp") for p in sorted((DATA / "sbp").glob("*.gz"))]
     out: dict[str, list[Seed]] = defaultdict(list)
     for seed in seeds:
         out[seed.target].append(seed)
@@ -335,12 +339,32 @@ def _sbf_blocks(data: bytes) -> list[tuple[int, int]]:
     return out
 
 
+def _sbp_frames(data: bytes) -> list[tuple[int, int]]:
+    """(start, end) of the SBP frames (preamble 0x55, payload length at byte 5), the bytes between them
+    their own."""
+    out, i, start = [], data.find(b"\x55"), 0
+    while i >= 0 and i + 6 <= len(data):
+        end = min(i + 8 + data[i + 5], len(data))
+        if i > start:
+            out.append((start, i))
+        out.append((i, end))
+        start = end
+        i = data.find(b"\x55", end)
+    if start < len(data):
+        out.append((start, len(data)))
+    return out
+
+
+def _binary_units(data: bytes, unit: str) -> list[tuple[int, int]]:
+    return _sbf_blocks(data) if unit == "block" else _sbp_frames(data)
+
+
 def _units(data: bytes, seed: Seed) -> list[bytes]:
     """The file cut into lines (with their ends), comma-separated tokens, UBX frames or SBF blocks."""
     if seed.unit == "frame":
         return [data[a:b] for a, b in _ubx_frames(data)]
-    if seed.unit == "block":
-        return [data[a:b] for a, b in _sbf_blocks(data)]
+    if seed.unit in ("block", "sbp"):
+        return [data[a:b] for a, b in _binary_units(data, seed.unit)]
     sep = b"," if seed.unit == "comma" else b"\n"
     parts = data.split(sep)
     return [p + sep for p in parts[:-1]] + ([parts[-1]] if parts[-1] else [])
@@ -379,7 +403,7 @@ def m_byte_delete(data: bytes, rng: Rng, seed: Seed) -> tuple[bytes, str]:
 
 
 def _unit_word(seed: Seed) -> str:
-    return {"frame": "frame", "comma": "token", "block": "block"}.get(seed.unit, "line")
+    return {"frame": "frame", "comma": "token", "block": "block", "sbp": "frame"}.get(seed.unit, "line")
 
 
 def m_line_delete(data: bytes, rng: Rng, seed: Seed) -> tuple[bytes, str]:
@@ -647,14 +671,23 @@ _PARQUET = ("parquet_flip_data", "parquet_flip_footer", "parquet_meta_json")
 
 def mutations_for(seed: Seed) -> tuple[str, ...]:
     """The mutation names that apply to a seed's kind of content."""
-    extra = {"line": _TEXT, "comma": _HEX, "frame": _FRAME, "block": _FRAME, "parquet": _PARQUET}[seed.unit]
+    extra = {
+        "line": _TEXT,
+        "comma": _HEX,
+        "frame": _FRAME,
+        "block": _FRAME,
+        "sbp": _FRAME,
+        "parquet": _PARQUET,
+    }
+    extra = extra[seed.unit]
     return _BYTE + extra + _GZIP
 
 
 def _mutation_name(mutation: str, seed: Seed) -> str:
     """The recorded name: line operations on UBX frames or hex tokens say so."""
-    if mutation.startswith("line_") and seed.unit in ("frame", "comma", "block"):
-        return mutation.replace("line_", {"frame": "frame_", "comma": "token_", "block": "block_"}[seed.unit])
+    if mutation.startswith("line_") and seed.unit in ("frame", "comma", "block", "sbp"):
+        prefix = {"frame": "frame_", "comma": "token_", "block": "block_", "sbp": "frame_"}[seed.unit]
+        return mutation.replace("line_", prefix)
     return mutation
 
 

@@ -678,8 +678,16 @@ def _evt_line(a) -> str:
     help="Output epoch table (.parquet or .csv), or a campaign dataset directory (any other name), "
     "written one station-day at a time.",
 )
-@click.option("--days", default=7.0, show_default=True, type=click.FloatRange(min=0, min_open=True))
-@click.option("--seed", default=0, show_default=True, type=int)
+@click.option(
+    "--days",
+    default=7.0,
+    show_default=True,
+    type=click.FloatRange(min=0, min_open=True),
+    help="Days simulated per station (1 Hz unless --interval).",
+)
+@click.option(
+    "--seed", default=0, show_default=True, type=int, help="Seed of every random draw (same seed, same data)."
+)
 @click.option(
     "--interval",
     "interval_s",
@@ -688,7 +696,13 @@ def _evt_line(a) -> str:
     type=click.FloatRange(min=0, min_open=True),
     help="Sampling interval (s).",
 )
-@click.option("--stations", default=1, show_default=True, type=click.IntRange(min=1))
+@click.option(
+    "--stations",
+    default=1,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="Stations simulated (independent errors, names SIM01, SIM02, ...).",
+)
 @click.option(
     "--sigma-ratio",
     default=None,
@@ -814,7 +828,13 @@ def _read_line(r) -> str:
     show_default=True,
     help="PL to assess; horizontal needs signed east/north errors.",
 )
-@click.option("--min-samples", default=200, show_default=True, type=click.IntRange(min=2))
+@click.option(
+    "--min-samples",
+    default=200,
+    show_default=True,
+    type=click.IntRange(min=2),
+    help="Independent samples a PL band needs (Comby et al. 2003: 200).",
+)
 @click.option(
     "--spacing",
     default=360.0,
@@ -1069,6 +1089,7 @@ def parametric(inputs, out_dir, services, decorrelation, confidence, **inputs_op
     default=Path("overbound-demo"),
     show_default=True,
     type=click.Path(file_okay=False, path_type=Path),
+    help="Output directory of the demo's reports.",
 )
 @click.option(
     "--days",
@@ -1077,7 +1098,7 @@ def parametric(inputs, out_dir, services, decorrelation, confidence, **inputs_op
     type=click.FloatRange(min=0, min_open=True),
     help="Length of the simulated campaign.",
 )
-@click.option("--seed", default=2, show_default=True, type=int)
+@click.option("--seed", default=2, show_default=True, type=int, help="Seed of the simulated campaign.")
 @_draws_figures
 def demo(out_dir, days, seed) -> None:
     """Analyse the embedded real WAAS day (USLO, 2006-12-27) and a simulated campaign."""
@@ -1531,7 +1552,13 @@ def _range_line(product, path: Path) -> str:
     help="Receiver height above the ellipsoid, m.",
 )
 @_services_option
-@click.option("--mode", type=click.Choice(["PA", "NPA"]), default="PA", show_default=True)
+@click.option(
+    "--mode",
+    type=click.Choice(["PA", "NPA"]),
+    default="PA",
+    show_default=True,
+    help="Precision approach (PA: HPL and VPL with K 6.0 and 5.33) or non-precision (NPA: HPL, K 6.18).",
+)
 @_mask_option
 @click.option("--geo", type=int, default=None, help="PRN of the GEO whose messages are used.")
 @click.option(
@@ -1700,3 +1727,30 @@ def schema() -> None:
 
 if __name__ == "__main__":  # pragma: no cover
     main()
+
+
+#: One example per command, shown at the end of its --help (the files named exist in the repository).
+_EXAMPLES = {
+    "analyze": "overbound analyze src/overbound/data/uslo-2006-361-waas.pos.gz --reference "
+    "35.311803,-120.661092,134.6419 -o out/\n  overbound analyze tests/data/g1000/*.csv.gz "
+    "tests/data/g1000/ProximityTestFlights.zip -o flights/",
+    "confidence": "overbound confidence src/overbound/data/uslo-2006-361-waas.pos.gz --reference "
+    "35.311803,-120.661092,134.6419 -o cl/",
+    "convert": "overbound convert src/overbound/data/uslo-2006-361-waas.pos.gz --reference mean "
+    "-o uslo.parquet",
+    "demo": "overbound demo -o overbound-demo/",
+    "evt": "overbound evt sim.parquet -o evt/   (sim.parquet from: overbound simulate -o sim.parquet)",
+    "ingest": "overbound ingest net/ day1.pos day2.pos --reference 43.56,1.48,200",
+    "parametric": "overbound parametric sim.parquet -o par/",
+    "sbas": "overbound sbas --obs tests/data/sbas/engine/SYNT0140_h02-04.19o.gz --nav "
+    "tests/data/sbas/engine/brdc0140.19n.gz --sbas tests/data/sbas/engine/h03.ems.gz -o synt.parquet",
+    "sbas-map": "overbound sbas-map --nav tests/data/sbas/engine/brdc0140.19n.gz --sbas "
+    "tests/data/sbas/network/egnos123_2019014.ems.gz --step 2 -o map/",
+    "schema": "overbound schema",
+    "simulate": "overbound simulate -o sim.parquet --days 7 --seed 1 --stations 3",
+    "synth-obs": "overbound synth-obs --sp3 tests/data/sbas/network/igs20361.sp3.gz --nav "
+    "tests/data/sbas/engine/brdc0140.19n.gz --ionex tests/data/sbas/network/igsg0140.19i.gz --dcb "
+    "tests/data/sbas/network/P1C11901.DCB --day 2019-01-14 --point TLSE,43.56,1.48,200 -o obs/",
+}
+for _name, _text in _EXAMPLES.items():
+    main.commands[_name].epilog = "\b\nExample:\n  " + _text

@@ -29,7 +29,7 @@ __all__ = ["FORMATS", "Source", "open_binary", "open_text", "read", "read_bytes"
 Source = str | Path | TextIO | BinaryIO
 
 #: Format names accepted by ``format=`` / ``--format``.
-FORMATS: tuple[str, ...] = ("parquet", "csv", "rtklib-pos", "glab", "ubx", "g1000", "sbf", "nmea")
+FORMATS: tuple[str, ...] = ("parquet", "csv", "rtklib-pos", "glab", "ubx", "g1000", "sbf", "nmea", "sbp")
 
 _GZIP = b"\x1f\x8b"
 _RTKLIB_DATA = re.compile(rb"^\s*\d{4}/\d{2}/\d{2}\s+\d{2}:\d{2}:\d{2}(\.\d+)?\s")
@@ -178,6 +178,10 @@ def sniff(source: Source) -> str:
 
     if looks_sbf(head):
         return "sbf"
+    from overbound.io.sbp import looks_sbp  # lazy: the sbp package loads with the reader
+
+    if looks_sbp(head):
+        return "sbp"
     lines = [ln for ln in head.splitlines()[:200] if ln.strip()]
     if any(
         ln.startswith((b"SBASOUT", b"SBASIONO", b"SBASCORR", b"SBASVAR", b"SBASUNSEL")) for ln in lines
@@ -221,6 +225,7 @@ def _readers() -> dict[str, Callable[..., tuple[pl.DataFrame, ReadReport]]]:
     from overbound.io.nmea import read_nmea
     from overbound.io.rtklib import read_rtklib_pos
     from overbound.io.sbf import read_sbf
+    from overbound.io.sbp import read_sbp
     from overbound.io.table import read_csv, read_parquet
     from overbound.io.ubx import read_ubx
 
@@ -233,6 +238,7 @@ def _readers() -> dict[str, Callable[..., tuple[pl.DataFrame, ReadReport]]]:
         "g1000": read_g1000,
         "sbf": read_sbf,
         "nmea": read_nmea,
+        "sbp": read_sbp,
     }
 
 
