@@ -48,6 +48,16 @@ def _reason_key(reason: str) -> str:
     return reason.split(":", 1)[0].strip().replace(" ", "_")
 
 
+def solution_columns(
+    solved: np.ndarray, east: np.ndarray, north: np.ndarray, up: np.ndarray, hpl: np.ndarray, vpl: np.ndarray
+) -> dict[str, np.ndarray]:
+    """``hpe``, ``vpe``, ``east``, ``north``, ``hpl``, ``vpl`` of a reader's epochs, NaN where not ``solved``
+    (the readers that form errors from positions: SBF, NMEA, SBP)."""
+    nan = np.full(np.shape(solved), np.nan)
+    cols = {"hpe": np.hypot(east, north), "vpe": up, "east": east, "north": north, "hpl": hpl, "vpl": vpl}
+    return {k: np.where(solved, np.asarray(v, float), nan) for k, v in cols.items()}
+
+
 def finalize_epochs(
     df: pl.DataFrame,
     log: RowLog,

@@ -33,7 +33,7 @@ import numpy as np
 import polars as pl
 from pynmeagps import NMEAMessageError, NMEAParseError, NMEAReader, NMEATypeError
 
-from overbound.io._common import RowLog, finalize_epochs
+from overbound.io._common import RowLog, finalize_epochs, solution_columns
 from overbound.io.geodesy import (
     MeanPosition,
     Reference,
@@ -188,7 +188,6 @@ def _epochs(found: dict, reference, name: str) -> tuple[pl.DataFrame, Reference]
     solved = positioned & np.isfinite(ep["hpl"].to_numpy()) & np.isfinite(ep["vpl"].to_numpy())
     used = resolve_geodetic(reference, *llh, solved, name)  # the mean of the epochs with a solution
     e, n, u = enu_errors_geodetic(*llh, used)
-    nan = np.full(ep.height, np.nan)
     utc_us = (ep["day_us"] + ep["tod"]).to_numpy()
     ok_time = np.isfinite(utc_us)
     utc = pl.Series(np.where(ok_time, utc_us, 0).astype(np.int64), dtype=pl.Int64).cast(pl.Datetime("us"))
@@ -197,12 +196,7 @@ def _epochs(found: dict, reference, name: str) -> tuple[pl.DataFrame, Reference]
         {
             "_line": ep["_line"],
             "time": time,
-            "hpe": np.where(positioned, np.hypot(e, n), nan),
-            "vpe": np.where(positioned, u, nan),
-            "east": np.where(positioned, e, nan),
-            "north": np.where(positioned, n, nan),
-            "hpl": np.where(positioned, ep["hpl"].to_numpy(), nan),
-            "vpl": np.where(positioned, ep["vpl"].to_numpy(), nan),
+            **solution_columns(positioned, e, n, u, ep["hpl"].to_numpy(), ep["vpl"].to_numpy()),
             "nsv": ep["nsv"],
             "mode": pl.Series(quality).replace_strict(_QUALITY, default="other", return_dtype=pl.String),
             "alert": ep["alert"],

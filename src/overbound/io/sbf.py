@@ -36,7 +36,7 @@ import polars as pl
 from pysbf2 import SBFReader
 from pysbf2.exceptions import SBFMessageError, SBFParseError, SBFTypeError
 
-from overbound.io._common import RowLog, finalize_epochs
+from overbound.io._common import RowLog, finalize_epochs, solution_columns
 from overbound.io.geodesy import (
     MeanPosition,
     Reference,
@@ -174,7 +174,6 @@ def _epochs(blocks: dict, reference, name: str) -> tuple[pl.DataFrame, Reference
     has_pl = positioned & (hpl != _DNU) & (vpl != _DNU) & np.isfinite(hpl) & np.isfinite(vpl)
     used = resolve_geodetic(reference, *llh, has_pl, name)  # the mean of the epochs with a solution
     e, n, u = enu_errors_geodetic(*llh, used)
-    nan = np.full(ep.height, np.nan)
     mode = [
         _TYPES.get(t, f"type {t}") + (" DO-229" if d else "")
         for t, d in zip(ep["type"], ep["do229"], strict=True)
@@ -183,12 +182,9 @@ def _epochs(blocks: dict, reference, name: str) -> tuple[pl.DataFrame, Reference
         {
             "_line": ep["_line"],
             "time": pl.Series(ep["_t"].to_numpy(), dtype=pl.Int64).cast(pl.Datetime("us")),
-            "hpe": np.where(positioned, np.hypot(e, n), nan),
-            "vpe": np.where(positioned, u, nan),
-            "east": np.where(positioned, e, nan),
-            "north": np.where(positioned, n, nan),
-            "hpl": np.where(has_pl, hpl, nan),
-            "vpl": np.where(has_pl, vpl, nan),
+            **solution_columns(
+                positioned, e, n, u, np.where(has_pl, hpl, np.nan), np.where(has_pl, vpl, np.nan)
+            ),
             "nsv": ep["nsv"],
             "mode": mode,
             "alert": ep["raim"].to_numpy() == 2,

@@ -35,7 +35,7 @@ import polars as pl
 from sbp.msg import SBP, UnpackError
 from sbp.table import dispatch
 
-from overbound.io._common import RowLog, finalize_epochs
+from overbound.io._common import RowLog, finalize_epochs, solution_columns
 from overbound.io.geodesy import (
     MeanPosition,
     Reference,
@@ -184,19 +184,13 @@ def _epochs(msgs: dict, reference, name: str) -> tuple[pl.DataFrame, Reference]:
     llh = [np.where(positioned, ep[c].to_numpy(), np.nan) for c in ("lat", "lon", "h")]
     used = resolve_geodetic(reference, *llh, positioned, name)
     e, n, u = enu_errors_geodetic(*llh, used)
-    nan = np.full(ep.height, np.nan)
     wn = ep["wn"].to_numpy(allow_copy=True).astype(float)
     t_us = _GPS_EPOCH_US + wn * _WEEK_US + ep["tow"].to_numpy() * 1000.0
     table = pl.DataFrame(
         {
             "_line": ep["_line"],
             "time": pl.Series(np.where(np.isfinite(t_us), t_us, 0).astype(np.int64)).cast(pl.Datetime("us")),
-            "hpe": np.where(positioned, np.hypot(e, n), nan),
-            "vpe": np.where(positioned, u, nan),
-            "east": np.where(positioned, e, nan),
-            "north": np.where(positioned, n, nan),
-            "hpl": np.where(positioned, ep["hpl"].to_numpy(), nan),
-            "vpl": np.where(positioned, ep["vpl"].to_numpy(), nan),
+            **solution_columns(positioned, e, n, u, ep["hpl"].to_numpy(), ep["vpl"].to_numpy()),
             "nsv": ep["nsv"],
             "mode": pl.Series(fix).replace_strict(_MODES, default="other", return_dtype=pl.String),
             "alert": ((flags & 7) == 0) | (((flags >> 23) & 1) == 1) | (((flags >> 24) & 1) == 1),
