@@ -283,19 +283,21 @@ def input_warnings(table: pl.DataFrame, reference: Reference | MeanPosition | No
             "whole file), not a surveyed position: HPE and VPE show the scatter about that mean, a constant "
             "bias of the receiver is invisible, and the integrity results are optimistic to that extent."
         )
-    ok = table.filter(pl.all_horizontal(pl.col("hpe", "vpe", "hpl", "vpl").is_finite()))
-    if ok.height:
-        hpe, vpe = ok["hpe"].median(), ok["vpe"].abs().median()
-        if hpe > IMPLAUSIBLE_MEDIAN_HPE_M or vpe > IMPLAUSIBLE_MEDIAN_VPE_M:
-            check = (
-                "Check the reference position (a height in feet, a sign, another station's coordinates)"
-                if reference is not None
-                else "Check the input's errors (their unit, and the position they were computed against)"
-            )
-            out.append(
-                f"The median HPE is {hpe:.3g} m and the median |VPE| {vpe:.3g} m: implausible for a GNSS "
-                f"receiver. {check}; every integrity result below rests on it."
-            )
+    # two columns' medians over the solved epochs, without a filtered copy of the whole table
+    solved = pl.all_horizontal(pl.col("hpe", "vpe", "hpl", "vpl").is_finite())
+    hpe, vpe = table.select(
+        pl.col("hpe").filter(solved).median(), pl.col("vpe").abs().filter(solved).median()
+    ).row(0)
+    if hpe is not None and (hpe > IMPLAUSIBLE_MEDIAN_HPE_M or vpe > IMPLAUSIBLE_MEDIAN_VPE_M):
+        check = (
+            "Check the reference position (a height in feet, a sign, another station's coordinates)"
+            if reference is not None
+            else "Check the input's errors (their unit, and the position they were computed against)"
+        )
+        out.append(
+            f"The median HPE is {hpe:.3g} m and the median |VPE| {vpe:.3g} m: implausible for a GNSS "
+            f"receiver. {check}; every integrity result below rests on it."
+        )
     return tuple(out)
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import datetime as dt
 from collections import Counter
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import polars as pl
@@ -46,6 +47,19 @@ class RowLog:
 def _reason_key(reason: str) -> str:
     """Counter key of a reason: its text before the first colon (details vary row by row)."""
     return reason.split(":", 1)[0].strip().replace(" ", "_")
+
+
+def need_reference(reference, source: str, fmt: str) -> None:
+    """The readers of positions (UBX, SBF, NMEA, SBP) form errors only against a reference."""
+    if reference is None:
+        raise InputError(
+            source, f"{fmt} logs hold positions, not errors: pass reference= (the true antenna position)"
+        )
+
+
+def file_station(station: str | None, source: str) -> str:
+    """``station``, else the stem of the file name (``log_110701.csv.gz`` -> ``log_110701``)."""
+    return station or Path(source).name.split(".")[0]
 
 
 def solution_columns(

@@ -44,7 +44,7 @@ from typing import BinaryIO, TextIO
 import numpy as np
 import polars as pl
 
-from overbound.io._common import RowLog, finalize_epochs
+from overbound.io._common import RowLog, file_station, finalize_epochs
 from overbound.io.gpstime import PLAUSIBLE_SPAN, plausible_us, utc_to_gpst
 from overbound.io.open import read_bytes, source_name
 from overbound.io.schema import InputError, ReadReport
@@ -89,7 +89,7 @@ def read_g1000(
     raw = _table(lines, header, log)
     if log.rows_read == 0:
         raise InputError(name, "no data rows after the three header lines")
-    stn = station or Path(name).name.split(".")[0]
+    stn = file_station(station, name)
     n_pl = int(raw.select(_solved().sum()).item())
     df, notes = _epochs(raw, log, stn)
     kept = int(df.select(pl.col("hpl").is_finite().sum()).item())

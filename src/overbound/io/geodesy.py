@@ -143,11 +143,10 @@ def enu_errors_geodetic(
     lat_deg: np.ndarray,
     lon_deg: np.ndarray,
     height_m: np.ndarray,
-    ref: Reference | MeanPosition,
-    use: np.ndarray | None = None,
+    ref: Reference,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """East, north, up errors (estimate minus truth) of geodetic positions (``ref``: see :func:`resolve`)."""
-    ref = resolve_geodetic(ref, lat_deg, lon_deg, height_m, use)
+    """East, north, up errors (estimate minus truth) of geodetic positions (``ref``: a position, the mean
+    one resolved first by :func:`resolve_geodetic`)."""
     e, n, u = pymap3d.geodetic2enu(
         np.asarray(lat_deg, float),
         np.asarray(lon_deg, float),
@@ -160,10 +159,10 @@ def enu_errors_geodetic(
 
 
 def enu_errors_ecef(
-    x: np.ndarray, y: np.ndarray, z: np.ndarray, ref: Reference | MeanPosition, use: np.ndarray | None = None
+    x: np.ndarray, y: np.ndarray, z: np.ndarray, ref: Reference
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """East, north, up errors (estimate minus truth) of ECEF positions (``ref``: see :func:`resolve`)."""
-    ref = resolve(ref, x, y, z, use)
+    """East, north, up errors (estimate minus truth) of ECEF positions (``ref``: a position, the mean one
+    resolved first by :func:`resolve`)."""
     e, n, u = pymap3d.ecef2enu(
         np.asarray(x, float),
         np.asarray(y, float),

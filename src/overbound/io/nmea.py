@@ -33,7 +33,7 @@ import numpy as np
 import polars as pl
 from pynmeagps import NMEAMessageError, NMEAParseError, NMEAReader, NMEATypeError
 
-from overbound.io._common import RowLog, finalize_epochs, solution_columns
+from overbound.io._common import RowLog, file_station, finalize_epochs, need_reference, solution_columns
 from overbound.io.geodesy import (
     MeanPosition,
     Reference,
@@ -45,17 +45,11 @@ from overbound.io.gpstime import utc_to_gpst
 from overbound.io.open import read_bytes, source_name
 from overbound.io.schema import InputError, ReadReport
 
-__all__ = ["looks_nmea", "read_nmea"]
+__all__ = ["read_nmea"]
 
 _QUALITY = {0: "no fix", 1: "GPS", 2: "SBAS/DGNSS", 3: "PPS", 4: "RTK", 5: "RTK float", 6: "dead reckoning",
             7: "manual", 8: "simulator"}  # fmt: skip
 _DAY_US = 86_400 * 1_000_000
-
-
-def looks_nmea(lines: list[bytes]) -> bool:
-    """At least two lines that are NMEA sentences (``$``, a 5-letter address, ``*`` and a checksum)."""
-    hits = [ln for ln in lines if ln[:1] == b"$" and b"*" in ln[-6:] and ln[1:6].isalpha()]
-    return len(hits) >= 2
 
 
 def read_nmea(
@@ -93,10 +87,7 @@ def read_nmea(
         raise InputError(
             name, "no date: GFA and GGA give the time of day only, and no RMC or ZDA gives the day"
         )
-    if reference is None:
-        raise InputError(
-            name, "NMEA logs hold positions, not errors: pass reference= (the true antenna position)"
-        )
+    need_reference(reference, name, "NMEA")
     log.rows_read = len(found["GFA"]) + log.n_rejected
     table, used = _epochs(found, reference, name)
     counts = f"{len(found['GFA'])} GFA, {len(found['GGA'])} GGA and {len(found['DATE'])} RMC/ZDA sentences"
@@ -105,7 +96,7 @@ def read_nmea(
         "UTC times converted to GPS time",
         f"errors against reference {reference_text(reference, used)}",
     ]
-    stn = station or Path(name).name.split(".")[0]
+    stn = file_station(station, name)
     return finalize_epochs(
         table.with_columns(pl.lit(stn).alias("station")), log, format="nmea", notes=tuple(notes)
     )

@@ -7,6 +7,7 @@ Gzip-compressed inputs are decompressed transparently.
 
 from __future__ import annotations
 
+import binascii
 import dataclasses
 import datetime as dt
 import gzip
@@ -174,13 +175,9 @@ def sniff(source: Source) -> str:
         return "ubx"
     if head.startswith(b"#airframe_info"):
         return "g1000"
-    from overbound.io.sbf import looks_sbf  # lazy: pysbf2 loads with the reader
-
-    if looks_sbf(head):
+    if _looks_sbf(head):
         return "sbf"
-    from overbound.io.sbp import looks_sbp  # lazy: the sbp package loads with the reader
-
-    if looks_sbp(head):
+    if _looks_sbp(head):
         return "sbp"
     lines = [ln for ln in head.splitlines()[:200] if ln.strip()]
     if any(
@@ -191,9 +188,7 @@ def sniff(source: Source) -> str:
         _RTKLIB_DATA.match(ln) for ln in lines[:50]
     ):
         return "rtklib-pos"
-    from overbound.io.nmea import looks_nmea  # lazy: pynmeagps loads with the reader
-
-    if looks_nmea([ln.strip() for ln in lines]):
+    if _looks_nmea([ln.strip() for ln in lines]):
         return "nmea"
     first = lines[0] if lines else b""
     if (b"," in first or b";" in first or b"\t" in first) and re.search(rb"[A-Za-z_]", first):
@@ -216,6 +211,41 @@ def _looks_ubx(head: bytes) -> bool:
                 return True
         i = head.find(b"\xb5\x62", i + 2)
     return hits > 0
+
+
+def _looks_sbf(head: bytes) -> bool:
+    """Septentrio SBF: a block (sync ``$@``, a length that is a multiple of 4) that leads to the next sync."""
+    i = head.find(b"$@")
+    while 0 <= i and i + 8 <= len(head):
+        length = int.from_bytes(head[i + 6 : i + 8], "little")
+        if length >= 8 and length % 4 == 0 and head[i + length : i + length + 2] == b"$@":
+            return True
+        i = head.find(b"$@", i + 2)
+    return False
+
+
+def _looks_sbp(head: bytes) -> bool:
+    """Swift SBP: three consecutive frames (preamble 0x55, type, sender, length, payload) whose CRC-16
+    (CCITT, over type to payload, as :mod:`sbp` checks it) passes."""
+    i = head.find(b"\x55")
+    while 0 <= i:
+        j, good = i, 0
+        while good < 3 and j + 6 <= len(head) and head[j] == 0x55:
+            end = j + 8 + head[j + 5]
+            if end > len(head) or binascii.crc_hqx(head[j + 1 : end - 2], 0) != int.from_bytes(
+                head[end - 2 : end], "little"
+            ):
+                break
+            good, j = good + 1, end
+        if good == 3:
+            return True
+        i = head.find(b"\x55", i + 1)
+    return False
+
+
+def _looks_nmea(lines: list[bytes]) -> bool:
+    """NMEA 0183: at least two sentences (``$``, a 5-letter address, ``*`` and a checksum at the end)."""
+    return sum(1 for ln in lines if ln[:1] == b"$" and b"*" in ln[-6:] and ln[1:6].isalpha()) >= 2
 
 
 def _readers() -> dict[str, Callable[..., tuple[pl.DataFrame, ReadReport]]]:

@@ -26,7 +26,6 @@ of the file), whatever their type: kept + rejected = read. Other blocks are coun
 
 from __future__ import annotations
 
-import datetime as dt
 from collections import Counter
 from pathlib import Path
 from typing import BinaryIO
@@ -36,7 +35,8 @@ import polars as pl
 from pysbf2 import SBFReader
 from pysbf2.exceptions import SBFMessageError, SBFParseError, SBFTypeError
 
-from overbound.io._common import RowLog, finalize_epochs, solution_columns
+from overbound.io._common import RowLog, file_station, finalize_epochs, need_reference, solution_columns
+from overbound.io._rinex import GPS_EPOCH_US, US
 from overbound.io.geodesy import (
     MeanPosition,
     Reference,
@@ -44,11 +44,10 @@ from overbound.io.geodesy import (
     reference_text,
     resolve_geodetic,
 )
-from overbound.io.gpstime import GPS_EPOCH
 from overbound.io.open import read_bytes, source_name
 from overbound.io.schema import InputError, ReadReport
 
-__all__ = ["looks_sbf", "read_sbf"]
+__all__ = ["read_sbf"]
 
 _SYNC = b"$@"
 _PVT, _DOP = "PVTGeodetic", "DOP"
@@ -56,20 +55,7 @@ _DNU = -2e10  # Do-Not-Use of the float fields
 #: PVT types (``Mode`` bits 0-3) by name.
 _TYPES = {0: "no PVT", 1: "standalone", 2: "DGNSS", 3: "fixed", 4: "RTK", 5: "RTK float", 6: "SBAS",
           7: "moving-base RTK", 8: "moving-base RTK float", 10: "PPP"}  # fmt: skip
-_WEEK_US = 7 * 86_400 * 1_000_000
-_GPS_EPOCH_US = int((GPS_EPOCH - dt.datetime(1970, 1, 1)).total_seconds()) * 1_000_000
-
-
-def looks_sbf(head: bytes) -> bool:
-    """Two consecutive SBF blocks (sync ``$@``, a length that is a multiple of 4 and leads to the next
-    sync) from the first sync in ``head``."""
-    i = head.find(_SYNC)
-    while 0 <= i and i + 8 <= len(head):
-        length = int.from_bytes(head[i + 6 : i + 8], "little")
-        if length >= 8 and length % 4 == 0 and head[i + length : i + length + 2] == _SYNC:
-            return True
-        i = head.find(_SYNC, i + 2)
-    return False
+_WEEK_US = 604_800 * US
 
 
 def read_sbf(
@@ -90,10 +76,7 @@ def read_sbf(
     blocks, other = _blocks(data, log)
     if not blocks[_PVT]:
         raise InputError(name, "no PVTGeodetic block (4007): no epoch to read")
-    if reference is None:
-        raise InputError(
-            name, "SBF logs hold positions, not errors: pass reference= (the true antenna position)"
-        )
+    need_reference(reference, name, "SBF")
     log.rows_read = len(blocks[_PVT]) + log.n_rejected
     table, used = _epochs(blocks, reference, name)
     notes = [
@@ -105,7 +88,7 @@ def read_sbf(
     n_no_dop = int(table["_no_dop"].sum())
     if n_no_dop:
         notes.append(f"{n_no_dop} epochs without a DOP block: no protection levels (no solution)")
-    stn = station or Path(name).name.split(".")[0]
+    stn = file_station(station, name)
     table = table.drop("_no_dop").with_columns(pl.lit(stn).alias("station"))
     return finalize_epochs(table, log, format="sbf", notes=tuple(notes))
 
@@ -141,7 +124,7 @@ def _time_key(msg) -> int:
     """GPS microseconds since 1970 of a block's time stamp (-1: Do-Not-Use)."""
     if msg.WNc == 65535 or msg.TOW == 4294967295:
         return -1
-    return int(_GPS_EPOCH_US + msg.WNc * _WEEK_US + msg.TOW * 1000)
+    return int(GPS_EPOCH_US + msg.WNc * _WEEK_US + msg.TOW * 1000)
 
 
 def _pvt_row(offset: int, m) -> dict:

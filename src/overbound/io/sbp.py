@@ -25,7 +25,6 @@ messages are counted in the notes.
 
 from __future__ import annotations
 
-import datetime as dt
 from collections import Counter
 from pathlib import Path
 from typing import BinaryIO
@@ -35,7 +34,8 @@ import polars as pl
 from sbp.msg import SBP, UnpackError
 from sbp.table import dispatch
 
-from overbound.io._common import RowLog, finalize_epochs, solution_columns
+from overbound.io._common import RowLog, file_station, finalize_epochs, need_reference, solution_columns
+from overbound.io._rinex import GPS_EPOCH_US, US
 from overbound.io.geodesy import (
     MeanPosition,
     Reference,
@@ -43,40 +43,21 @@ from overbound.io.geodesy import (
     reference_text,
     resolve_geodetic,
 )
-from overbound.io.gpstime import GPS_EPOCH
 from overbound.io.open import read_bytes, source_name
 from overbound.io.schema import InputError, ReadReport
 
-__all__ = ["looks_sbp", "read_sbp"]
+__all__ = ["read_sbp"]
 
 _PREAMBLE = 0x55
 _PL, _PL_DEP_A, _POS_LLH, _GPS_TIME = 0x0217, 0x0216, 0x020A, 0x0102
 _MODES = {-1: "not given", 0: "invalid", 1: "SPP", 2: "DGNSS", 3: "float RTK", 4: "fixed RTK",
           5: "dead reckoning", 6: "SBAS"}  # fmt: skip
-_WEEK_US = 7 * 86_400 * 1_000_000
-_GPS_EPOCH_US = int((GPS_EPOCH - dt.datetime(1970, 1, 1)).total_seconds()) * 1_000_000
+_WEEK_US = 604_800 * US
 
 
 def _frame_end(data: bytes, i: int) -> int:
     """End of the frame a preamble at ``i`` announces (beyond ``len(data)`` when cut)."""
     return i + 8 + data[i + 5] if i + 6 <= len(data) else len(data) + 1
-
-
-def looks_sbp(head: bytes) -> bool:
-    """Three consecutive frames whose CRC passes, from the first preamble in ``head``."""
-    i = head.find(bytes([_PREAMBLE]))
-    while 0 <= i < len(head):
-        j, good = i, 0
-        while good < 3 and _frame_end(head, j) <= len(head):
-            try:
-                SBP.unpack(head[j : _frame_end(head, j)])
-            except (UnpackError, AssertionError):
-                break
-            good, j = good + 1, _frame_end(head, j)
-        if good == 3:
-            return True
-        i = head.find(bytes([_PREAMBLE]), i + 1)
-    return False
 
 
 def read_sbp(
@@ -102,10 +83,7 @@ def read_sbp(
         sbas = sum(1 for _, m in llh if m.flags & 7 == 6)
         seen = f"{len(llh)} MSG_POS_LLH, {sbas} in SBAS mode"
         raise InputError(name, f"no MSG_PROTECTION_LEVEL (0x0217 or 0x0216): no protection levels ({seen})")
-    if reference is None:
-        raise InputError(
-            name, "SBP logs hold positions, not errors: pass reference= (the true antenna position)"
-        )
+    need_reference(reference, name, "SBP")
     log.rows_read = len(pls) + log.n_rejected
     table, used = _epochs(msgs, reference, name)
     notes = [
@@ -114,7 +92,7 @@ def read_sbp(
         + (", ".join(f"{k} {v}" for k, v in sorted(other.items())) or "none"),
         f"errors against reference {reference_text(reference, used)}",
     ]
-    stn = station or Path(name).name.split(".")[0]
+    stn = file_station(station, name)
     return finalize_epochs(
         table.with_columns(pl.lit(stn).alias("station")), log, format="sbp", notes=tuple(notes)
     )
@@ -185,7 +163,7 @@ def _epochs(msgs: dict, reference, name: str) -> tuple[pl.DataFrame, Reference]:
     used = resolve_geodetic(reference, *llh, positioned, name)
     e, n, u = enu_errors_geodetic(*llh, used)
     wn = ep["wn"].to_numpy(allow_copy=True).astype(float)
-    t_us = _GPS_EPOCH_US + wn * _WEEK_US + ep["tow"].to_numpy() * 1000.0
+    t_us = GPS_EPOCH_US + wn * _WEEK_US + ep["tow"].to_numpy() * 1000.0
     table = pl.DataFrame(
         {
             "_line": ep["_line"],

@@ -20,7 +20,7 @@ import polars as pl
 from pyubx2 import GET, VALNONE, UBXReader
 from pyubx2.exceptions import UBXMessageError, UBXParseError, UBXTypeError
 
-from overbound.io._common import RowLog, finalize_epochs
+from overbound.io._common import RowLog, file_station, finalize_epochs, need_reference
 from overbound.io.geodesy import (
     MeanPosition,
     Reference,
@@ -168,13 +168,10 @@ def read_ubx(
     # Rows are epochs (NAV-PL messages) plus the frames rejected whole (corrupt, truncated,
     # undecodable), whatever their class: kept + rejected = read. Other frames are noted.
     log.rows_read = len(decoded["NAV-PL"]) + log.n_rejected
-    if reference is None:
-        raise InputError(
-            name, "UBX logs hold positions, not errors: pass reference= (the true antenna position)"
-        )
+    need_reference(reference, name, "UBX")
     tables = _tables(decoded)
     epochs, notes = _epochs(tables, reference, name)
-    stn = station or Path(name).name.split(".")[0]
+    stn = file_station(station, name)
     epochs = epochs.with_columns(pl.lit(stn).alias("station"))
     frame_note = "frames: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
     if skipped:

@@ -110,7 +110,6 @@ def _gap_caution(counting: CountingResult) -> str | None:
 
 def _distribution(t: pl.DataFrame) -> PlDistribution:
     ok = t.filter(pl.col("hpl").is_finite() & pl.col("vpl").is_finite())
-    times = t["time"].sort()
     in_force, n_force = None, 0
     if "hal" in t.columns:
         logged = ok.filter(pl.col("hal").is_finite())
@@ -123,8 +122,8 @@ def _distribution(t: pl.DataFrame) -> PlDistribution:
     return PlDistribution(
         n_epochs=t.height,
         n_with_pl=ok.height,
-        start=_iso(times[0]) if t.height else None,
-        end=_iso(times[-1]) if t.height else None,
+        start=_iso(t["time"].min()) if t.height else None,
+        end=_iso(t["time"].max()) if t.height else None,
         hpl=_quantiles(ok["hpl"].to_numpy()),
         vpl=_quantiles(ok["vpl"].to_numpy()),
         in_force=in_force,
