@@ -1,4 +1,4 @@
-"""The README's promises: two set-up commands, CI runs the test one, the schema table is current."""
+"""The README's promises: two set-up commands, CI runs the test one; the docs' schema table is current."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ from overbound.io.schema import schema_markdown
 
 ROOT = Path(__file__).resolve().parents[1]
 README = (ROOT / "README.md").read_text(encoding="utf-8")
+EPOCH_TABLE = (ROOT / "docs" / "epoch-table.md").read_text(encoding="utf-8")
 
 
 def _setup_commands() -> list[str]:
@@ -29,6 +30,12 @@ def test_ci_runs_the_readme_test_command():
     assert tests in ci.splitlines()
 
 
-def test_readme_schema_table_is_generated_from_schema():
-    inside = README.split("<!-- schema:begin -->")[1].split("<!-- schema:end -->")[0]
+def test_setup_commands_make_and_use_a_virtual_environment():
+    """A stock Debian/Ubuntu Python refuses ``pip install`` outside one (externally-managed-environment)."""
+    for command in _setup_commands():
+        assert command.startswith("python3 -m venv .venv && .venv/bin/python -m pip install")
+
+
+def test_docs_schema_table_is_generated_from_schema():
+    inside = EPOCH_TABLE.split("<!-- schema:begin -->")[1].split("<!-- schema:end -->")[0]
     assert inside.strip() == schema_markdown().strip()
