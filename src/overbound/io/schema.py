@@ -1,7 +1,7 @@
 """The epoch table: overbound's one data model.
 
 One row per receiver epoch. Every reader returns this table, every method takes it.
-This module is the single document that defines it; the README's table is generated
+This module is the single document that defines it; the table of docs/epoch-table.md is generated
 from :data:`COLUMNS` (``overbound schema``; a test keeps the two equal).
 
 Time base
@@ -227,7 +227,7 @@ def _check_monotonic(df: pl.DataFrame, source: str) -> None:
 
 
 def schema_markdown() -> str:
-    """The README table of the epoch table's columns."""
+    """The documentation table (docs/epoch-table.md) of the epoch table's columns."""
     rows = ["| column | dtype | unit | required | meaning |", "|---|---|---|---|---|"]
     for c in COLUMNS:
         dtype = "Datetime[us]" if isinstance(c.dtype, pl.Datetime) else str(c.dtype)

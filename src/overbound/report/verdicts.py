@@ -185,7 +185,7 @@ def verdict_section(assessment: Assessment) -> str:
         matrix_html(assessment.services),
         "<p><small>Each cell links to its evidence. The rules (counted evidence first; tail models vote "
         "only when the data do not reject them; pass only when every admissible model passes) are in "
-        "the method notes and the README.</small></p>",
+        "the method notes and the documentation (docs/verdicts.md).</small></p>",
         "<h3>Why not pass</h3>",
         _why(assessment.services),
     ]
