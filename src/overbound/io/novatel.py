@@ -124,13 +124,18 @@ def _frames(data: bytes):
     unknown = ne.HEADER_FORMAT.UNKNOWN
     pos = off = 0
     while True:
-        if pos < len(data):
-            pos += framer.write(data[pos : pos + max(framer.available_space, 1)])
+        written = framer.write(data[pos : pos + framer.available_space]) if pos < len(data) else 0
+        pos += written
+        framed = off
         for frame, meta in framer:
             yield off, frame, meta.format != unknown
             off += len(frame)
         if pos >= len(data):
             break
+        if not written and off == framed:  # a full buffer the framer cannot cut: hand it on as unknown
+            stuck = framer.flush()
+            yield off, stuck, False
+            off += len(stuck)
     rest = framer.flush()
     if rest:
         yield off, rest, False
