@@ -82,8 +82,9 @@ TARGETS: tuple[str, ...] = (
     "sbf",
     "nmea",
     "sbp",
+    "novatel",
 )
-EPOCH_TARGETS = ("rtklib-pos", "glab", "ubx", "csv", "parquet", "g1000", "sbf", "nmea", "sbp")
+EPOCH_TARGETS = ("rtklib-pos", "glab", "ubx", "csv", "parquet", "g1000", "sbf", "nmea", "sbp", "novatel")
 OUTCOMES = ("ok", "clean_error", "unnamed_error", "traceback", "unbalanced", "hang", "memory", "crash")
 ACCEPTABLE = ("ok", "clean_error")
 
@@ -93,7 +94,9 @@ UBX_REFERENCE = "43.5607,1.4809,207.0"
 SBF_REFERENCE = "50.848642,4.732128,128.33"
 NMEA_REFERENCE = "50.848642,4.732128,128.33"
 SBP_REFERENCE = "37.83124,-122.28651,-17.40"
+NOVATEL_REFERENCE = "51.11635,-114.0389,1031.3"
 _REFERENCES = {
+    "novatel": NOVATEL_REFERENCE,
     "sbp": SBP_REFERENCE,
     "rtklib-pos": RTKLIB_REFERENCE,
     "ubx": UBX_REFERENCE,
@@ -126,6 +129,9 @@ _EPOCH_RE: dict[str, tuple[re.Pattern[bytes], ...]] = {
             re.M,
         ),
     ),
+    "novatel": (
+        re.compile(rb"^#[A-Z0-9_]+A,[^,;]*,\d+,[\d.]+,[A-Z_]+,(?P<week>\d{4}),(?P<tow>\d+\.\d+),", re.M),
+    ),
     "g1000": (re.compile(rb"^(?P<year>\d{4})-\d\d-\d\d,\s*(?P<hour>\d\d):\d\d:\d\d", re.M),),
     "rinex_obs": (
         re.compile(rb"^> (?P<year>\d{4}) [ \d]\d [ \d]\d (?P<hour>[ \d]\d) ", re.M),
@@ -153,7 +159,8 @@ class Seed:
     name: str  # file name without a ``.gz`` suffix
     content: bytes
     gz: bool  # the fixture was gzip-compressed
-    unit: str  # "line", "comma" (hex-wrapped UBX), "frame" (binary UBX), "block" (SBF); "parquet" for Parquet
+    unit: str  # "line", "comma" (hex-wrapped UBX), "frame" (binary UBX), "block" (SBF), "sbp", "novatel"
+    # (binary SBP / NovAtel frames); "parquet" for Parquet
     fixed: bool = False  # fixed-width columns (RINEX, SP3): field mutations keep the width
     role: str = ""  # its place in the `overbound sbas` CLI cases: obs, nav, sbas, sp3, ubx
     origin: str = ""  # the fixture it comes from, relative to the repository
@@ -185,7 +192,7 @@ def _cut(content: bytes, target: str, unit: str, limit: int) -> bytes:
     if unit == "frame":
         frames = [f for f in _ubx_frames(content) if f[1] <= limit and content[f[0] : f[0] + 2] == _UBX_SYNC]
         return content[: frames[-1][1]] if frames else content[:limit]
-    if unit in ("block", "sbp"):
+    if unit in _BINARY_UNITS:
         ends = [b for _, b in _binary_units(content, unit) if b <= limit]
         return content[: ends[-1]] if ends else content[:limit]
     sep = b"," if unit == "comma" else b"\n"
@@ -307,6 +314,10 @@ def load_seeds() -> dict[str, tuple[Seed, ...]]:
     ]
     seeds += [_fixture("nmea", f"tests/data/nmea/{p.name}") for p in sorted((DATA / "nmea").glob("*.gz"))]
     seeds += [_fixture("sbp", f"tests/data/sbp/{p.name}", "sbp") for p in sorted((DATA / "sbp").glob("*.gz"))]
+    seeds += [
+        _fixture("novatel", f"tests/data/novatel/{p.name}", "novatel" if ".bin" in p.name else "line")
+        for p in sorted((DATA / "novatel").glob("*.gz"))
+    ]
     out: dict[str, list[Seed]] = defaultdict(list)
     for seed in seeds:
         out[seed.target].append(seed)
@@ -355,15 +366,34 @@ def _sbp_frames(data: bytes) -> list[tuple[int, int]]:
     return out
 
 
+def _novatel_frames(data: bytes) -> list[tuple[int, int]]:
+    """(start, end) of the binary NovAtel records (sync 0xAA 0x44 0x12, header length at byte 3, message
+    length at bytes 8-9, CRC-32), the bytes between them their own."""
+    out, i, start = [], data.find(b"\xaa\x44\x12"), 0
+    while i >= 0 and i + 10 <= len(data):
+        end = min(i + data[i + 3] + int.from_bytes(data[i + 8 : i + 10], "little") + 4, len(data))
+        if i > start:
+            out.append((start, i))
+        out.append((i, end))
+        start = end
+        i = data.find(b"\xaa\x44\x12", end)
+    if start < len(data):
+        out.append((start, len(data)))
+    return out
+
+
+_BINARY_UNITS = {"block": _sbf_blocks, "sbp": _sbp_frames, "novatel": _novatel_frames}
+
+
 def _binary_units(data: bytes, unit: str) -> list[tuple[int, int]]:
-    return _sbf_blocks(data) if unit == "block" else _sbp_frames(data)
+    return _BINARY_UNITS[unit](data)
 
 
 def _units(data: bytes, seed: Seed) -> list[bytes]:
     """The file cut into lines (with their ends), comma-separated tokens, UBX frames or SBF blocks."""
     if seed.unit == "frame":
         return [data[a:b] for a, b in _ubx_frames(data)]
-    if seed.unit in ("block", "sbp"):
+    if seed.unit in _BINARY_UNITS:
         return [data[a:b] for a, b in _binary_units(data, seed.unit)]
     sep = b"," if seed.unit == "comma" else b"\n"
     parts = data.split(sep)
@@ -403,7 +433,9 @@ def m_byte_delete(data: bytes, rng: Rng, seed: Seed) -> tuple[bytes, str]:
 
 
 def _unit_word(seed: Seed) -> str:
-    return {"frame": "frame", "comma": "token", "block": "block", "sbp": "frame"}.get(seed.unit, "line")
+    return {"frame": "frame", "comma": "token", "block": "block", "sbp": "frame", "novatel": "frame"}.get(
+        seed.unit, "line"
+    )
 
 
 def m_line_delete(data: bytes, rng: Rng, seed: Seed) -> tuple[bytes, str]:
@@ -677,6 +709,7 @@ def mutations_for(seed: Seed) -> tuple[str, ...]:
         "frame": _FRAME,
         "block": _FRAME,
         "sbp": _FRAME,
+        "novatel": _FRAME,
         "parquet": _PARQUET,
     }
     extra = extra[seed.unit]
@@ -685,8 +718,15 @@ def mutations_for(seed: Seed) -> tuple[str, ...]:
 
 def _mutation_name(mutation: str, seed: Seed) -> str:
     """The recorded name: line operations on UBX frames or hex tokens say so."""
-    if mutation.startswith("line_") and seed.unit in ("frame", "comma", "block", "sbp"):
-        prefix = {"frame": "frame_", "comma": "token_", "block": "block_", "sbp": "frame_"}[seed.unit]
+    if mutation.startswith("line_") and seed.unit in ("frame", "comma", "block", "sbp", "novatel"):
+        words = {
+            "frame": "frame_",
+            "comma": "token_",
+            "block": "block_",
+            "sbp": "frame_",
+            "novatel": "frame_",
+        }
+        prefix = words[seed.unit]
         return mutation.replace("line_", prefix)
     return mutation
 

@@ -30,7 +30,8 @@ __all__ = ["FORMATS", "Source", "open_binary", "open_text", "read", "read_bytes"
 Source = str | Path | TextIO | BinaryIO
 
 #: Format names accepted by ``format=`` / ``--format``.
-FORMATS: tuple[str, ...] = ("parquet", "csv", "rtklib-pos", "glab", "ubx", "g1000", "sbf", "nmea", "sbp")
+FORMATS: tuple[str, ...] = ("parquet", "csv", "rtklib-pos", "glab", "ubx", "g1000", "sbf", "nmea", "sbp",
+                            "novatel")  # fmt: skip
 
 _GZIP = b"\x1f\x8b"
 _RTKLIB_DATA = re.compile(rb"^\s*\d{4}/\d{2}/\d{2}\s+\d{2}:\d{2}:\d{2}(\.\d+)?\s")
@@ -179,6 +180,8 @@ def sniff(source: Source) -> str:
         return "sbf"
     if _looks_sbp(head):
         return "sbp"
+    if _looks_novatel(head):
+        return "novatel"
     lines = [ln for ln in head.splitlines()[:200] if ln.strip()]
     if any(
         ln.startswith((b"SBASOUT", b"SBASIONO", b"SBASCORR", b"SBASVAR", b"SBASUNSEL")) for ln in lines
@@ -243,6 +246,33 @@ def _looks_sbp(head: bytes) -> bool:
     return False
 
 
+_NOVATEL_ASCII = re.compile(rb"^#[A-Z0-9_]+A,[^;\r\n]*;[^\r\n]*\*([0-9a-fA-F]{8})\s*$", re.M)
+
+
+def _novatel_crc(data: bytes) -> int:
+    """NovAtel's 32-bit CRC (reflected polynomial 0xEDB88320, no initial or final inversion: OEM7
+    manual, "32-Bit CRC"), which is zlib's CRC-32 with both inversions undone."""
+    return binascii.crc32(data, 0xFFFFFFFF) ^ 0xFFFFFFFF
+
+
+def _looks_novatel(head: bytes) -> bool:
+    """NovAtel OEM: a binary record (sync 0xAA 0x44 0x12, header length, message length at bytes 8-9)
+    or an ASCII one (``#NAMEA,header;fields*crc``) whose CRC-32 passes (OEM7 manual, "Binary", "ASCII")."""
+    i = head.find(b"\xaa\x44\x12")
+    while 0 <= i and i + 10 <= len(head):
+        end = i + head[i + 3] + int.from_bytes(head[i + 8 : i + 10], "little") + 4
+        if end <= len(head) and _novatel_crc(head[i : end - 4]) == int.from_bytes(
+            head[end - 4 : end], "little"
+        ):
+            return True
+        i = head.find(b"\xaa\x44\x12", i + 1)
+    for m in _NOVATEL_ASCII.finditer(head):
+        body = head[m.start() + 1 : m.start(1) - 1]
+        if _novatel_crc(body) == int(m.group(1), 16):
+            return True
+    return False
+
+
 def _looks_nmea(lines: list[bytes]) -> bool:
     """NMEA 0183: at least two sentences (``$``, a 5-letter address, ``*`` and a checksum at the end)."""
     return sum(1 for ln in lines if ln[:1] == b"$" and b"*" in ln[-6:] and ln[1:6].isalpha()) >= 2
@@ -253,6 +283,7 @@ def _readers() -> dict[str, Callable[..., tuple[pl.DataFrame, ReadReport]]]:
     from overbound.io.g1000 import read_g1000
     from overbound.io.glab import read_glab
     from overbound.io.nmea import read_nmea
+    from overbound.io.novatel import read_novatel
     from overbound.io.rtklib import read_rtklib_pos
     from overbound.io.sbf import read_sbf
     from overbound.io.sbp import read_sbp
@@ -269,6 +300,7 @@ def _readers() -> dict[str, Callable[..., tuple[pl.DataFrame, ReadReport]]]:
         "sbf": read_sbf,
         "nmea": read_nmea,
         "sbp": read_sbp,
+        "novatel": read_novatel,
     }
 
 
