@@ -77,6 +77,7 @@ TARGETS: tuple[str, ...] = (
     "sp3",
     "ems",
     "rinex_b",
+    "rtklib_sbs",
     "ubx_raw",
     "g1000",
     "sbf",
@@ -148,6 +149,7 @@ _EPOCH_RE: dict[str, tuple[re.Pattern[bytes], ...]] = {
     "sp3": (re.compile(rb"^\*  (?P<year>\d{4}) [ \d]\d [ \d]\d (?P<hour>[ \d]\d) ", re.M),),
     "ems": (re.compile(rb"^\d{3} (?P<year>\d\d) \d\d \d\d (?P<hour>\d\d) \d\d \d\d ", re.M),),
     "rinex_b": (re.compile(rb"^\d{3} (?P<year>\d\d) \d\d \d\d (?P<hour>\d\d) \d\d [ \d]\d\.\d", re.M),),
+    "rtklib_sbs": (re.compile(rb"^\s*(?P<week>\d{4})\s+(?P<tow>\d+)\s+\d{3}\s+\d{1,2} : ", re.M),),
 }
 
 
@@ -300,6 +302,10 @@ def load_seeds() -> dict[str, tuple[Seed, ...]]:
     seeds.append(_fixture("ems", s + "ems/h02.ems.gz", role="sbas"))
     seeds.append(_fixture("ems", s + "msas/ubx_20080526_sbas.ems.gz"))
     seeds.append(_fixture("rinex_b", s + "rinexb/egnos123_h02-04.19b.gz", fixed=True, role="sbas"))
+    seeds += [
+        _fixture("rtklib_sbs", f"tests/data/rtklib-sbs/{n}.sbs.gz")
+        for n in ("ubx_20080526", "oemv_200911218")
+    ]
     seeds.append(
         _fixture(
             "ubx_raw", s + "ublox/egnos_sdk_20121025_1202-1217.txt.gz", "comma", role="ubx", limit=120_000
@@ -867,6 +873,8 @@ def _call(target: str, path: Path):
         from overbound.io.ems import read_ems as reader
     elif target == "rinex_b":
         from overbound.io.rinex_b import read_rinex_b as reader
+    elif target == "rtklib_sbs":
+        from overbound.io.rtklib_sbs import read_rtklib_sbs as reader
     elif target == "ubx_raw":
         from overbound.io.ubx_raw import read_ubx_raw as reader
     else:

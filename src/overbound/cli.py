@@ -1260,8 +1260,9 @@ _mask_option = click.option(
 @_many_files(
     "--sbas",
     "sbas_files",
-    "SBAS messages: EMS files or RINEX-B (2.10/2.11 GEO SBAS broadcast) files, plain or gzip, "
-    "recognised by content (default: the SBAS frames of a UBX log in --obs).",
+    "SBAS messages: EMS files, RINEX-B (2.10/2.11 GEO SBAS broadcast) files or RTKLIB .sbs message "
+    "logs (convbin -s: the route for Hemisphere, NovAtel and other raw logs via RTKLIB convbin), plain "
+    "or gzip, recognised by content (default: the SBAS frames of a UBX log in --obs).",
 )
 @click.option(
     "--reference",
@@ -1531,7 +1532,7 @@ def _range_line(product, path: Path) -> str:
 
 @main.command("sbas-map")
 @_many_files("--nav", "nav", "GPS broadcast ephemerides (RINEX navigation).", required=True)
-@_many_files("--sbas", "sbas_files", "SBAS messages: EMS or RINEX-B files.", required=True)
+@_many_files("--sbas", "sbas_files", "SBAS messages: EMS, RINEX-B or RTKLIB .sbs files.", required=True)
 @click.option(
     "--area",
     nargs=4,

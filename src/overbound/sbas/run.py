@@ -1,8 +1,9 @@
 """Files in, epoch table out: the ``overbound sbas`` pipeline around :func:`~overbound.sbas.engine.run_sbas`.
 
 :func:`process` reads the observation, navigation and SBAS message files (each recognised by its
-content: RINEX 2/3 observations, plain, gzip or Hatanaka; RINEX 2/3 GPS navigation; EMS or RINEX-B
-SBAS messages; u-blox UBX raw logs, binary or hex-wrapped, which may carry all three), checks that
+content: RINEX 2/3 observations, plain, gzip or Hatanaka; RINEX 2/3 GPS navigation; EMS, RINEX-B or
+RTKLIB ``.sbs`` SBAS messages; u-blox UBX raw logs, binary or hex-wrapped, which may carry all three;
+other receivers' raw logs through RTKLIB ``convbin``, which writes RINEX and ``.sbs``), checks that
 they fit together (ephemerides and messages over the observation span), chooses the reference
 position and the GEO, runs the engine and gathers every count of what was rejected on the way.
 :func:`write_run` writes the epoch table (:func:`overbound.io.table.write_epochs`, so ``overbound
@@ -66,6 +67,7 @@ from overbound.io.rinex_nav import (
     select_ephemeris,
 )
 from overbound.io.rinex_obs import read_rinex_obs
+from overbound.io.rtklib_sbs import SBS_LINE, read_rtklib_sbs
 from overbound.io.schema import InputError, ReadReport
 from overbound.io.table import write_epochs
 from overbound.io.ubx_raw import is_ubx, read_ubx_raw
@@ -93,23 +95,25 @@ __all__ = [
 #: A tracked GEO is left when its last message is older than this (s).
 GEO_SWITCH_S = 12.0
 _EMS_LINE = re.compile(rb"^\s*\d{3} \d\d \d\d \d\d \d\d \d\d \d\d [ \d]?\d [0-9A-Fa-f]{64}\s*$")
+_SBS_LINE = re.compile(SBS_LINE.encode())
 _KINDS = {
     "obs": ("rinex-obs", "ubx"),
     "nav": ("rinex-nav", "ubx"),
-    "sbas": ("ems", "rinex-b", "ubx"),
+    "sbas": ("ems", "rinex-b", "rtklib-sbs", "ubx"),
 }
 _KIND_TEXT = {
     "rinex-obs": "a RINEX observation file",
     "rinex-nav": "a RINEX navigation file",
     "ems": "an EMS SBAS message file",
     "rinex-b": "a RINEX-B SBAS message file",
+    "rtklib-sbs": "an RTKLIB .sbs SBAS message log",
     "ubx": "a u-blox UBX log",
 }
 _OPTION = {"obs": "--obs", "nav": "--nav", "sbas": "--sbas"}
 _ACCEPTS = {
     "obs": "RINEX 2/3 observations (plain, gzip, Hatanaka) or a u-blox UBX raw log",
     "nav": "RINEX 2/3 GPS navigation or a u-blox UBX raw log",
-    "sbas": "EMS or RINEX-B SBAS message files or a u-blox UBX raw log",
+    "sbas": "EMS, RINEX-B or RTKLIB .sbs SBAS message files or a u-blox UBX raw log",
 }
 Progress = Callable[[str], None]
 
@@ -175,7 +179,8 @@ def process(
     ----------
     obs : observation files (RINEX 2/3, gzip, Hatanaka) or u-blox UBX raw logs.
     nav : GPS navigation files; may be empty when a UBX log in ``obs`` carries ephemerides.
-    sbas : EMS or RINEX-B files; may be empty when a UBX log in ``obs`` carries SBAS frames.
+    sbas : EMS, RINEX-B or RTKLIB ``.sbs`` files; may be empty when a UBX log in ``obs`` carries SBAS
+        frames.
     reference : a :class:`Reference`, an ECEF triple, ``"mean"`` (see the module notes) or None
         (the RINEX header position).
     station : name for the ``station`` column (default: the RINEX marker name or the file stem).
@@ -434,7 +439,7 @@ def read_stations(
     if eph.height:
         eph = eph.unique(("prn", "toc", "iode", "iodc"), keep="first", maintain_order=True)
     step("reading SBAS messages")
-    sbas_readers = {"ems": read_ems, "rinex-b": read_rinex_b}
+    sbas_readers = {"ems": read_ems, "rinex-b": read_rinex_b, "rtklib-sbs": read_rtklib_sbs}
     shared = SbasFrames.concat(
         _read_role(sbas, "sbas", lambda raw: raw.frames, sbas_readers, lambda f: f, reports)
     )  # once, for every station
@@ -602,6 +607,8 @@ def _kind(data: bytes, role: str) -> str:
     if not data.strip():
         return "ems" if role == "sbas" else "empty"  # an hour without messages is an empty EMS file
     line = data.lstrip().split(b"\n", 1)[0]
+    if _SBS_LINE.match(line):
+        return "rtklib-sbs"  # RTKLIB's "week tow prn type : hex" (its first field has 4 digits, EMS's 3)
     if _EMS_LINE.match(line) or re.match(rb"^\s*\d{3} \d\d \d\d \d\d ", line):
         return "ems"  # the EMS reader counts or explains malformed lines
     return "unknown"
@@ -641,7 +648,8 @@ def _check(inp: SbasInputs) -> dict:
     if len(fr) == 0 or not fr.crc_ok.any():
         raise InputError(
             src, "no SBAS messages" + (" with a valid CRC" if len(fr) else "")
-            + ": give --sbas with EMS or RINEX-B files (or a u-blox log with SBAS RXM-SFRB(X) frames)",
+            + ": give --sbas with EMS, RINEX-B or RTKLIB .sbs files (or a u-blox log with SBAS "
+            "RXM-SFRB(X) frames)",
         )  # fmt: skip
     t_msg = fr.time[fr.crc_ok]
     if t_msg.min() > t_obs.max() or t_msg.max() < t_obs.min():
