@@ -19,7 +19,7 @@ import polars as pl
 from overbound.campaign import runner_for
 from overbound.io.open import Source
 from overbound.io.schema import InputError, ReadReport
-from overbound.methods.counting import continuity_risk
+from overbound.methods.counting import continuity_risks
 from overbound.sbas.engine import SbasOptions
 from overbound.sbas.maps import (
     EGNOS_AREA,
@@ -33,6 +33,7 @@ from overbound.sbas.maps import (
 from overbound.sbas.messages import SbasMessages, decode
 from overbound.sbas.run import read_stations
 from overbound.services import ServiceLevel, resolve_services
+from overbound.stats.mergeable import row_percentiles
 
 __all__ = ["MapOptions", "ServiceMap", "compute_map", "default_services", "summarise"]
 
@@ -195,7 +196,7 @@ def _span_rows(times, hpl, vpl, iono, lat, lon, services, hour, window_s) -> pl.
     for s in services:
         with np.errstate(invalid="ignore"):
             ok = solved & (hpl <= s.hal) & ((vpl <= s.val) if s.val is not None else True)
-        risk = [continuity_risk(times, ok[p], window_s=window_s).risk for p in range(n_p)]
+        risk = [r.risk for r in continuity_risks(times, ok, window_s=window_s)]
         rows.append(pl.DataFrame({
             "lat": lat, "lon": lon, "service": [s.name] * n_p,
             "hour": pl.Series([hour] * n_p, dtype=pl.Int32),
@@ -210,8 +211,4 @@ def _span_rows(times, hpl, vpl, iono, lat, lon, services, hour, window_s) -> pl.
 
 def _percentile(x: np.ndarray, solved: np.ndarray, q: float) -> pl.Series:
     """Per row, numpy's linear-interpolation percentile of the solved epochs' values (null without any)."""
-    out = np.full(x.shape[0], np.nan)
-    has = solved.any(axis=1)
-    if has.any():
-        out[has] = np.nanpercentile(np.where(solved[has], x[has], np.nan), q, axis=1)
-    return pl.Series(out).fill_nan(None)
+    return pl.Series(row_percentiles(x, solved, q)).fill_nan(None)

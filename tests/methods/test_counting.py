@@ -238,3 +238,21 @@ def test_alerted_epochs_are_unavailable():
     assert k.vertical.stanford.unavailable == 1 and k.vertical.stanford.normal == 5
     assert res.safety["vertical"].n == 5
     assert table["hpl"][1] == 10.0  # the table itself is untouched
+
+
+def test_continuity_risks_of_many_series_equal_each_alone():
+    """The service-volume map's per-point continuity (one grid for every point) against the single count."""
+    from overbound.methods.counting import continuity_risk, continuity_risks
+
+    rng = np.random.default_rng(5)
+    t = np.arange(0, 4000, dtype=np.int64) * 1_000_000
+    t = np.delete(t, np.r_[100:130, 2000:2003])  # gaps
+    t[500] += 400_000  # an epoch off the grid
+    avail = rng.random((60, t.size)) > np.linspace(0.0, 0.3, 60)[:, None]
+    avail[0] = True
+    avail[1] = False
+    for window in (15.0, 3600.0, 0.5):  # 0.5 s: the interval exceeds the window, no count
+        many = continuity_risks(t, avail, window_s=window)
+        assert len(many) == avail.shape[0]
+        assert many == [continuity_risk(t, a, window_s=window) for a in avail]
+    assert continuity_risks(t[:1], avail[:, :1], window_s=15.0)[0].reason == "fewer than two epochs"

@@ -90,3 +90,25 @@ def test_exact_quantile_equals_numpy_quantile():
             bins, below = rank_bins(counts, q, scale=1)
             got = exact_percentile(n, q, below, values_in_bins(x, bins), scale=1)
             assert got == np.quantile(x, q), (n, q)
+
+
+def test_row_percentiles_equal_numpy_nanpercentile_bit_for_bit():
+    from overbound.stats.mergeable import row_percentiles
+
+    rng = np.random.default_rng(11)
+    x = rng.lognormal(2.0, 1.0, (400, 97))
+    x[rng.random(x.shape) < 0.02] = np.nan  # NaN values are left out like invalid ones
+    valid = (rng.random(x.shape) < rng.random((400, 1))) & np.isfinite(x)
+    valid[:3] = False  # rows without any value
+    valid[3, :] = False
+    valid[3, 5] = True  # one value
+    valid[4, :] = False
+    valid[4, [1, 2]] = True  # two
+    x[5] = 7.0  # ties
+    valid[5] = True
+    for q in (0, 50, 95, 99, 99.9, 100):
+        got = row_percentiles(x, valid, q)
+        for r in range(x.shape[0]):
+            vals = x[r][valid[r]]
+            want = np.percentile(vals, q) if vals.size else np.nan
+            assert got[r] == want or (np.isnan(got[r]) and np.isnan(want)), (q, r, got[r], want)

@@ -18,7 +18,7 @@ import polars as pl
 
 from overbound.io.schema import as_numpy
 from overbound.services import ServiceLevel
-from overbound.stats.dependence import SlotGrid, prefix_counts, slot_grid
+from overbound.stats.dependence import SlotGrid, slot_grid
 
 __all__ = [
     "AXES",
@@ -32,6 +32,7 @@ __all__ = [
     "StanfordCounts",
     "StanfordHistogram",
     "continuity_risk",
+    "continuity_risks",
     "count_kpis",
     "plot_max",
     "safety_index",
@@ -389,27 +390,45 @@ def continuity_risk(time_us: np.ndarray, available: np.ndarray, *, window_s: flo
     return _continuity_on_grid(slot_grid(np.asarray(time_us, dtype=np.int64)), available, window_s)
 
 
+def continuity_risks(
+    time_us: np.ndarray, available: np.ndarray, *, window_s: float
+) -> list[ContinuityResult]:
+    """:func:`continuity_risk` of many series sampled at the same epochs (the points of a service-volume
+    map): one row of ``available`` (series, epochs) per series, the grid placed once. Each result equals
+    :func:`continuity_risk` of its row alone."""
+    grid = slot_grid(np.asarray(time_us, dtype=np.int64))
+    return _continuity_rows(grid, np.atleast_2d(np.asarray(available, dtype=bool)), window_s)
+
+
 def _continuity_on_grid(grid: SlotGrid | None, available: np.ndarray, window_s: float) -> ContinuityResult:
+    return _continuity_rows(grid, np.asarray(available, dtype=bool)[None, :], window_s)[0]
+
+
+def _continuity_rows(grid: SlotGrid | None, available: np.ndarray, window_s: float) -> list[ContinuityResult]:
+    """The window counts of :func:`continuity_risk` for each row of ``available`` on one grid."""
+    rows = available.shape[0]
     if grid is None:
-        return no_grid_continuity(None, 0, window_s)
+        return [no_grid_continuity(None, 0, window_s)] * rows
     if none := no_grid_continuity(grid.interval_s, grid.n_off_grid, window_s):
-        return none
+        return [none] * rows
     w = window_slots(window_s, grid.interval_s)
-    up = np.zeros(grid.size, dtype=bool)  # slot holds an available epoch
-    up[grid.index] = available
-    lost_prefix = prefix_counts(~up)  # a slot is lost when it is a gap or unavailable
+    up = np.zeros((rows, grid.size), dtype=bool)  # slot holds an available epoch
+    up[:, grid.index] = available
+    # lost[r, k] = lost slots (gaps or unavailable) of row r before slot k: int32 while it fits
+    lost = np.zeros((rows, grid.size + 1), dtype=np.int32 if grid.size < 2**31 - 1 else np.int64)
+    np.cumsum(~up, axis=1, dtype=lost.dtype, out=lost[:, 1:])
     # Windows start at slots 0..K-1 (their w following slots exist); events in slots
     # (k, k+w] = prefix[k+w+1] - prefix[k+1], taken as contiguous slices, not gathers.
     k_max = max(grid.size - w, 0)
-    starts = up[:k_max]
-    n_fail = int(
-        np.count_nonzero(starts & (lost_prefix[w + 1 : w + 1 + k_max] != lost_prefix[1 : 1 + k_max]))
-    )
+    starts = up[:, :k_max]
+    n_fail = np.count_nonzero(starts & (lost[:, w + 1 : w + 1 + k_max] != lost[:, 1 : 1 + k_max]), axis=1)
+    del lost
     gp = grid.gap_prefix
-    n_gap = int(np.count_nonzero(starts & (gp[w + 1 : w + 1 + k_max] != gp[1 : 1 + k_max])))
-    n = int(np.count_nonzero(starts))
-    n_truncated = int(np.count_nonzero(up[k_max:]))
-    return continuity_result(n, n_fail, n_gap, n_truncated, window_s, grid.interval_s, grid.n_off_grid)
+    n_gap = np.count_nonzero(starts & (gp[w + 1 : w + 1 + k_max] != gp[1 : 1 + k_max]), axis=1)
+    n = np.count_nonzero(starts, axis=1)
+    n_truncated = np.count_nonzero(up[:, k_max:], axis=1)
+    return [continuity_result(int(n[r]), int(n_fail[r]), int(n_gap[r]), int(n_truncated[r]), window_s,
+                              grid.interval_s, grid.n_off_grid) for r in range(rows)]  # fmt: skip
 
 
 def continuity_result(

@@ -169,6 +169,29 @@ def _bin_start(code: int) -> float:
     return float(np.array([u], dtype=np.uint64).view(np.float64)[0])
 
 
+def row_percentiles(x: np.ndarray, valid: np.ndarray, q: float) -> np.ndarray:
+    """Per row of ``x``, numpy's ``nanpercentile`` of the row's ``valid`` values (NaN where a row has
+    none), to the last bit, without numpy's per-row loop (``apply_along_axis``).
+
+    numpy's linear method: virtual index ``v = (n - 1) * (q / 100)``, the order statistics
+    ``a = s[floor(v)]`` and ``b = s[min(floor(v) + 1, n - 1)]`` of the row's ``n`` valid values, and
+    its ``_lerp``: ``a + (b - a) g``, or ``b - (b - a)(1 - g)`` when ``g = v - floor(v) >= 0.5``.
+    """
+    s = np.sort(np.where(valid, x, np.nan), axis=1)  # NaN sorts last: the valid values lead each row
+    n = np.count_nonzero(valid, axis=1)
+    v = (np.maximum(n, 1) - 1) * np.true_divide(q, 100.0)
+    k = np.floor(v)
+    g = v - k
+    lo = np.clip(k.astype(np.int64), 0, np.maximum(n - 1, 0))
+    hi = np.minimum(lo + 1, np.maximum(n - 1, 0))
+    a = np.take_along_axis(s, lo[:, None], axis=1)[:, 0]
+    b = np.take_along_axis(s, hi[:, None], axis=1)[:, 0]
+    d = b - a
+    out = np.where(g >= 0.5, b - d * (1.0 - g), a + d * g)
+    out[n == 0] = np.nan
+    return out
+
+
 def exact_percentile(n: int, q: float, below: int, values: np.ndarray, *, scale: float = 100.0) -> float:
     """numpy's ``percentile(pooled, q)`` (``scale=1``: ``quantile(pooled, q)``) from the values of
     the rank bins of all partitions.
