@@ -82,6 +82,7 @@ TARGETS: tuple[str, ...] = (
     "sbf",
     "nmea",
     "sbp",
+    "truth",
 )
 EPOCH_TARGETS = ("rtklib-pos", "glab", "ubx", "csv", "parquet", "g1000", "sbf", "nmea", "sbp")
 OUTCOMES = ("ok", "clean_error", "unnamed_error", "traceback", "unbalanced", "hang", "memory", "crash")
@@ -127,6 +128,11 @@ _EPOCH_RE: dict[str, tuple[re.Pattern[bytes], ...]] = {
         ),
     ),
     "g1000": (re.compile(rb"^(?P<year>\d{4})-\d\d-\d\d,\s*(?P<hour>\d\d):\d\d:\d\d", re.M),),
+    "truth": (
+        re.compile(rb"^\s*(?P<year>\d{4})/\d\d/\d\d\s+(?P<hour>\d\d):\d\d:\d\d", re.M),
+        re.compile(rb"^(?P<year>\d{4})-\d\d-\d\d[T ](?P<hour>\d\d):", re.M),
+        re.compile(rb"^(?P<week>\d{4}),(?P<tow>\d+\.\d+),", re.M),
+    ),
     "rinex_obs": (
         re.compile(rb"^> (?P<year>\d{4}) [ \d]\d [ \d]\d (?P<hour>[ \d]\d) ", re.M),
         re.compile(
@@ -307,6 +313,9 @@ def load_seeds() -> dict[str, tuple[Seed, ...]]:
     ]
     seeds += [_fixture("nmea", f"tests/data/nmea/{p.name}") for p in sorted((DATA / "nmea").glob("*.gz"))]
     seeds += [_fixture("sbp", f"tests/data/sbp/{p.name}", "sbp") for p in sorted((DATA / "sbp").glob("*.gz"))]
+    seeds += [
+        _fixture("truth", f"tests/data/truth/{p.name}") for p in sorted((DATA / "truth").glob("*truth*.gz"))
+    ]
     out: dict[str, list[Seed]] = defaultdict(list)
     for seed in seeds:
         out[seed.target].append(seed)
@@ -829,6 +838,13 @@ def _call(target: str, path: Path):
         from overbound.io.rinex_b import read_rinex_b as reader
     elif target == "ubx_raw":
         from overbound.io.ubx_raw import read_ubx_raw as reader
+    elif target == "truth":  # the trajectory read, then interpolated to the rover's epochs
+        from overbound.io.open import read
+        from overbound.io.truth import read_truth
+
+        truth = read_truth(path)
+        read(DATA / "truth" / "rover.pos.gz", reference=truth)
+        return truth.read_report()
     else:
         raise ValueError(f"unknown target {target!r}")
     _, report = reader(path)
