@@ -84,6 +84,7 @@ TARGETS: tuple[str, ...] = (
     "nmea",
     "sbp",
     "novatel",
+    "truth",
 )
 EPOCH_TARGETS = ("rtklib-pos", "glab", "ubx", "csv", "parquet", "g1000", "sbf", "nmea", "sbp", "novatel")
 OUTCOMES = ("ok", "clean_error", "unnamed_error", "traceback", "unbalanced", "hang", "memory", "crash")
@@ -134,6 +135,11 @@ _EPOCH_RE: dict[str, tuple[re.Pattern[bytes], ...]] = {
         re.compile(rb"^#[A-Z0-9_]+A,[^,;]*,\d+,[\d.]+,[A-Z_]+,(?P<week>\d{4}),(?P<tow>\d+\.\d+),", re.M),
     ),
     "g1000": (re.compile(rb"^(?P<year>\d{4})-\d\d-\d\d,\s*(?P<hour>\d\d):\d\d:\d\d", re.M),),
+    "truth": (
+        re.compile(rb"^\s*(?P<year>\d{4})/\d\d/\d\d\s+(?P<hour>\d\d):\d\d:\d\d", re.M),
+        re.compile(rb"^(?P<year>\d{4})-\d\d-\d\d[T ](?P<hour>\d\d):", re.M),
+        re.compile(rb"^(?P<week>\d{4}),(?P<tow>\d+\.\d+),", re.M),
+    ),
     "rinex_obs": (
         re.compile(rb"^> (?P<year>\d{4}) [ \d]\d [ \d]\d (?P<hour>[ \d]\d) ", re.M),
         re.compile(
@@ -323,6 +329,9 @@ def load_seeds() -> dict[str, tuple[Seed, ...]]:
     seeds += [
         _fixture("novatel", f"tests/data/novatel/{p.name}", "novatel" if ".bin" in p.name else "line")
         for p in sorted((DATA / "novatel").glob("*.gz"))
+    ]
+    seeds += [
+        _fixture("truth", f"tests/data/truth/{p.name}") for p in sorted((DATA / "truth").glob("*truth*.gz"))
     ]
     out: dict[str, list[Seed]] = defaultdict(list)
     for seed in seeds:
@@ -877,6 +886,13 @@ def _call(target: str, path: Path):
         from overbound.io.rtklib_sbs import read_rtklib_sbs as reader
     elif target == "ubx_raw":
         from overbound.io.ubx_raw import read_ubx_raw as reader
+    elif target == "truth":  # the trajectory read, then interpolated to the rover's epochs
+        from overbound.io.open import read
+        from overbound.io.truth import read_truth
+
+        truth = read_truth(path)
+        read(DATA / "truth" / "rover.pos.gz", reference=truth)
+        return truth.read_report()
     else:
         raise ValueError(f"unknown target {target!r}")
     _, report = reader(path)

@@ -24,6 +24,7 @@ from overbound.methods.evidence import Evidence, counted_evidence
 from overbound.services import SERVICES, ServiceLevel, resolve_services
 
 if TYPE_CHECKING:  # imported when run: they are the slow part of the import
+    from overbound.io.truth import Truth
     from overbound.methods.parametric import ParametricAnalysis
     from overbound.methods.protection_levels import PlOnlyAnalysis
     from overbound.methods.tail_extrapolation import TailAnalysis
@@ -65,6 +66,10 @@ class Analysis:
     warnings : what the reader must know before trusting the numbers, shown on the report's first
         screen and in ``summary.json``: errors against the mean position (``--reference mean``), an
         error scale implausible for the reference (:func:`input_warnings`).
+    truth : with a truth trajectory (``reference`` a :class:`~overbound.io.truth.Truth`, ``--truth``), what
+        the errors rest on: :meth:`~overbound.io.truth.Truth.summary` (file, span, samples, gaps,
+        interpolation) and its ``statement``, said in the report's header and ``summary.json``: not a
+        warning, the basis of every error.
     band_confidences : the confidence levels of the PL bands the verdicts re-evaluate at each
         service's risk (R8 of :mod:`overbound.verdict`), computed ahead on a campaign's workers
         (keys of :func:`~overbound.verdict.band_confidence_inputs`); empty: the verdicts compute them.
@@ -85,6 +90,7 @@ class Analysis:
     band_confidences: dict = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
     pl_only: PlOnlyAnalysis | None = None
+    truth: dict | None = None
 
     @property
     def n_rejected(self) -> int:
@@ -99,7 +105,7 @@ def load_epochs(
     inputs: Sequence[Source],
     *,
     format: str | None = None,
-    reference: Reference | None = None,
+    reference: Reference | MeanPosition | Truth | None = None,
     station: str | None = None,
     strict: bool = False,
     mapping: Mapping[str, str] | None = None,
@@ -148,7 +154,7 @@ def analyze(
     *,
     services: Sequence[str] | Sequence[ServiceLevel] | None = None,
     format: str | None = None,
-    reference: Reference | MeanPosition | None = None,
+    reference: Reference | MeanPosition | Truth | None = None,
     station: str | None = None,
     strict: bool = False,
     mapping: Mapping[str, str] | None = None,
@@ -244,7 +250,16 @@ def analyze(
     if progress:
         progress("counting KPIs")
     done = _with_methods(table, reports, levels, count_kpis(table, levels), label, methods, progress)
-    return replace(done, warnings=input_warnings(table, reference))
+    return replace(done, warnings=input_warnings(table, reference), truth=truth_basis(reference))
+
+
+def truth_basis(reference: Reference | MeanPosition | Truth | None) -> dict | None:
+    """:attr:`Analysis.truth` of ``reference``: the summary and statement of a truth trajectory, else None."""
+    from overbound.io.truth import Truth
+
+    if not isinstance(reference, Truth):
+        return None
+    return {"statement": reference.statement(), **reference.summary()}
 
 
 def _pl_only(table, reports, levels, label, progress) -> Analysis:

@@ -16,6 +16,7 @@ __all__ = [
     "MEAN_POSITION",
     "MeanPosition",
     "Reference",
+    "enu_errors_along",
     "enu_errors_ecef",
     "enu_errors_geodetic",
     "reference_text",
@@ -163,12 +164,27 @@ def enu_errors_ecef(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """East, north, up errors (estimate minus truth) of ECEF positions (``ref``: a position, the mean one
     resolved first by :func:`resolve`)."""
+    return _ecef_to_enu(x, y, z, ref.lat_deg, ref.lon_deg, ref.height_m)
+
+
+def enu_errors_along(
+    x: np.ndarray,
+    y: np.ndarray,
+    z: np.ndarray,
+    truth_x: np.ndarray,
+    truth_y: np.ndarray,
+    truth_z: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """East, north, up errors (estimate minus truth) of ECEF positions against a truth that moves: epoch
+    ``i`` in the local east-north-up frame of its own truth position ``truth_*[i]`` (ECEF m), as
+    :func:`enu_errors_ecef` takes them about one fixed position (the schema's sign convention)."""
+    lat, lon, h = pymap3d.ecef2geodetic(truth_x, truth_y, truth_z)
+    return _ecef_to_enu(x, y, z, lat, lon, h)
+
+
+def _ecef_to_enu(x, y, z, lat0, lon0, h0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    # pymap3d broadcasts the origin: one fixed position, or one per epoch
     e, n, u = pymap3d.ecef2enu(
-        np.asarray(x, float),
-        np.asarray(y, float),
-        np.asarray(z, float),
-        ref.lat_deg,
-        ref.lon_deg,
-        ref.height_m,
+        np.asarray(x, float), np.asarray(y, float), np.asarray(z, float), lat0, lon0, h0
     )
     return np.asarray(e, float), np.asarray(n, float), np.asarray(u, float)

@@ -17,13 +17,16 @@ import zipfile
 import zlib
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
-from typing import BinaryIO, TextIO
+from typing import TYPE_CHECKING, BinaryIO, TextIO
 
 import polars as pl
 
 from overbound.io.dataset import is_dataset, read_dataset
 from overbound.io.geodesy import MeanPosition, Reference
 from overbound.io.schema import REQUIRED, InputError, ReadReport
+
+if TYPE_CHECKING:
+    from overbound.io.truth import Truth
 
 __all__ = ["FORMATS", "Source", "open_binary", "open_text", "read", "read_bytes", "sniff", "source_name"]
 
@@ -130,6 +133,16 @@ def expand_archives(sources: Sequence[Source]) -> list[Source]:
         except (zipfile.BadZipFile, OSError) as exc:
             raise InputError(str(src), f"unreadable zip archive: {exc}") from None
     return out
+
+
+def read_text(source: Source) -> str:
+    """All of ``source`` as text (:func:`open_text`); a file opened here is closed, a stream is left open."""
+    stream = open_text(source)
+    try:
+        return stream.read()
+    finally:
+        if isinstance(source, str | Path):
+            stream.close()
 
 
 def read_bytes(source: Source) -> bytes:
@@ -308,7 +321,7 @@ def read(
     source: Source,
     *,
     format: str | None = None,
-    reference: Reference | MeanPosition | None = None,
+    reference: Reference | MeanPosition | Truth | None = None,
     station: str | None = None,
     mapping: Mapping[str, str] | None = None,
     time_range: tuple[dt.datetime | None, dt.datetime | None] | None = None,
@@ -322,7 +335,10 @@ def read(
     source : path or open stream (text or binary); ``.gz`` is handled by content; a campaign
         dataset directory (:mod:`overbound.io.dataset`) reads as its whole epoch table.
     format : one of :data:`FORMATS`; sniffed from the content when ``None``.
-    reference : true antenna position, for formats that carry positions rather than errors.
+    reference : true antenna position, for formats that carry positions rather than errors; or a
+        :class:`~overbound.io.truth.Truth` trajectory (a moving receiver), interpolated to each epoch
+        (:func:`~overbound.io.truth.apply_truth`: epochs outside its span are rejected, those in its
+        gaps invalidated).
     station : station name; by default the reader takes it from the content or the file name.
     mapping : for ``csv``/``parquet``: canonical column name -> column name in the file.
     time_range : keep epochs with ``start <= time < stop`` (GPS time); either end may be ``None``.
@@ -360,12 +376,18 @@ def _read_one(
     readers = _readers()
     if fmt not in readers:
         raise InputError(source_name(source), f"unknown format {fmt!r}; choose one of {', '.join(FORMATS)}")
-    kwargs: dict = {"reference": reference, "station": station, "strict": strict}
+    from overbound.io.truth import Truth, apply_truth
+
+    truth = reference if isinstance(reference, Truth) else None
+    # with a truth trajectory the reader forms errors against its first sample, then apply_truth
+    # takes them against the trajectory
+    kwargs: dict = {"reference": truth.anchor if truth else reference, "station": station, "strict": strict}
     if fmt in ("csv", "parquet"):
         kwargs["mapping"] = mapping
-    if fmt == "parquet":
+    if fmt == "parquet" and truth is None:  # the truth needs east and north, whatever is kept
         kwargs["columns"] = columns
-    return readers[fmt](source, **kwargs)
+    table, report = readers[fmt](source, **kwargs)
+    return apply_truth(table, report, truth) if truth else (table, report)
 
 
 def filter_time(

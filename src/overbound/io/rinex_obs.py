@@ -405,11 +405,7 @@ def _header_field(label: str, body: str, f: dict, glo: dict[int, int], name: str
         for k in range(8):
             slot, frq = body[4 + 7 * k : 7 + 7 * k].strip(), body[8 + 7 * k : 10 + 7 * k].strip()
             if slot and frq:
-                try:
-                    glo[int(slot[1:] if slot[0] == "R" else slot)] = int(frq)
-                except ValueError:
-                    why = f"unreadable GLONASS slot/frequency {slot!r} {frq!r}"
-                    raise InputError(name, why, line=i + 1) from None
+                glo[_int(slot[1:] if slot[0] == "R" else slot, name, i)] = _int(frq, name, i)
 
 
 def _header_time(body: str, name: str, i: int) -> int:

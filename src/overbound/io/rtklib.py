@@ -24,21 +24,19 @@ from __future__ import annotations
 import datetime as dt
 import re
 from dataclasses import dataclass
-from pathlib import Path
 from types import MappingProxyType
 
 import numpy as np
 import polars as pl
+import pymap3d
 
 from overbound.io._common import RowLog, finalize_epochs
 from overbound.io.geodesy import (
     MeanPosition,
     Reference,
     enu_errors_ecef,
-    enu_errors_geodetic,
     reference_text,
     resolve,
-    resolve_geodetic,
 )
 from overbound.io.gpstime import (
     PLAUSIBLE_END_US,
@@ -47,13 +45,14 @@ from overbound.io.gpstime import (
     leap_seconds,
     utc_to_gpst,
 )
-from overbound.io.open import Source, open_text, source_name
+from overbound.io.open import Source, read_text, source_name
 from overbound.io.schema import InputError, ReadReport
 
 __all__ = [
     "SOLUTION_QUALITY",
     "PosHeader",
     "parse_pos_header",
+    "read_pos_positions",
     "read_rtklib_pos",
 ]
 
@@ -182,43 +181,13 @@ def read_rtklib_pos(
     >>> table.height, str(table["station"][0]), report.n_rejected
     (2865, 'USLO', 0)
     """
-    name = source_name(source)
-    stream = open_text(source)
-    try:
-        text = stream.read()
-    finally:
-        if isinstance(source, str | Path):
-            stream.close()
-    lines = text.split("\n")
-    header = parse_pos_header(lines, name)
+    name, text, lines, header = _load(source)
     log = RowLog(name, strict=strict)
     notes: list[str] = []
 
     if header.line and (header.field_of("hpl") is None or header.field_of("vpl") is None):
         raise InputError(name, f"{_NO_PL} (columns: {', '.join(header.columns)})", line=header.line)
-    raw = _data_lines(lines, header.separator)
-    if raw.height == 0:
-        raise InputError(name, "no epochs (no data lines after the % header)")
-    if not header.line:
-        raise InputError(
-            name, "no column header line ('%  GPST  latitude(deg) ... hpl (m) vpl (m)'); " + _NO_PL
-        )
-    if reference is None:
-        raise InputError(name, _NEEDS_REFERENCE)
-    log.rows_read = raw.height
-    cut = _cut_last_line(text, raw)
-    if cut:
-        log.reject(cut, "truncated line: the last line has no line end and is shorter than the one before")
-        raw = raw.filter(pl.col("_line") != cut)
-
-    parsed = _parse_fields(raw, header)
-    for line, reason in parsed.filter(pl.col("_bad").is_not_null()).select("_line", "_bad").iter_rows():
-        log.reject(line, reason)
-    good = parsed.filter(pl.col("_bad").is_null())
-    if good.height == 0:
-        raise InputError(
-            name, f"no epochs: all {raw.height} data lines rejected (first: line {log.first_bad})"
-        )
+    good = _good_lines(text, lines, header, log, _NO_PL, reference is None)
 
     time = _to_gpst(good["_time"], header.time_system)
     if header.time_system != "GPST" and good.height:
@@ -257,6 +226,73 @@ def read_rtklib_pos(
     if none.any():
         notes.append(f"{int(none.sum())} epochs with Q=0 (no solution) kept as no-solution epochs")
     return finalize_epochs(pl.DataFrame(cols), log, format=_FORMAT, notes=tuple(notes))
+
+
+def read_pos_positions(source: Source, *, strict: bool = False) -> tuple[pl.DataFrame, RowLog, str]:
+    """The positions of any RTKLIB ``.pos`` solution file, with or without protection levels (a truth
+    trajectory: :mod:`overbound.io.truth`).
+
+    Every variant :func:`read_rtklib_pos` reads (calendar or week/tow time in GPST, UTC or JST;
+    latitude/longitude/height in degrees or d-m-s, or x/y/z-ecef; the separators) is parsed by the same
+    code; malformed and cut lines are counted in the returned :class:`~overbound.io._common.RowLog`
+    (raised with ``strict``).
+
+    Returns
+    -------
+    (samples, log, time_system) : ``_line``, ``time`` (GPS time), ``x``, ``y``, ``z`` (ECEF m) and
+        ``q`` (the RTKLIB quality flag, null without a ``Q`` column), in file order; the log; the
+        header's time system.
+    """
+    name, text, lines, header = _load(source)
+    log = RowLog(name, strict=strict)
+    good = _good_lines(text, lines, header, log, "no positions", False)
+    xyz = _ecef_positions(good, header, name)
+    q = good["_q"] if "_q" in good.columns else pl.Series([None] * good.height, dtype=pl.Int64)
+    samples = pl.DataFrame(
+        {"_line": good["_line"], "time": _to_gpst(good["_time"], header.time_system),
+         "x": xyz[0], "y": xyz[1], "z": xyz[2], "q": q}
+    )  # fmt: skip
+    return samples, log, header.time_system
+
+
+def _load(source: Source) -> tuple[str, str, list[str], PosHeader]:
+    """The file's name, text, lines and parsed ``%`` header."""
+    name, text = source_name(source), read_text(source)
+    lines = text.split("\n")
+    return name, text, lines, parse_pos_header(lines, name)
+
+
+def _good_lines(
+    text: str, lines: list[str], header: PosHeader, log: RowLog, no_header: str, no_reference: bool
+) -> pl.DataFrame:
+    """The data lines that parse (:func:`_parse_fields`), the others counted in ``log``; ``InputError``
+    without data lines, without a column header line (``no_header`` says what is missing then),
+    ``no_reference``, or when every line is bad."""
+    name = log.source
+    raw = _data_lines(lines, header.separator)
+    if raw.height == 0:
+        raise InputError(name, "no epochs (no data lines after the % header)")
+    if not header.line:
+        raise InputError(
+            name, "no column header line ('%  GPST  latitude(deg) ... hpl (m) vpl (m)'); " + no_header
+        )
+    if no_reference:
+        raise InputError(name, _NEEDS_REFERENCE)
+    log.rows_read = raw.height
+    cut = _cut_last_line(text, raw)
+    if cut:
+        log.reject(cut, "truncated line: the last line has no line end and is shorter than the one before")
+        raw = raw.filter(pl.col("_line") != cut)
+
+    parsed = _parse_fields(raw, header)
+    for line, reason in parsed.filter(pl.col("_bad").is_not_null()).select("_line", "_bad").iter_rows():
+        log.reject(line, reason)
+    good = parsed.filter(pl.col("_bad").is_null())
+    if good.height == 0:
+        raise InputError(
+            name, f"no epochs: all {raw.height} data lines rejected (first: line {log.first_bad})"
+        )
+    return good
 
 
 def parse_pos_header(lines: list[str], source: str = "<stream>") -> PosHeader:
@@ -480,14 +516,19 @@ def _errors(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, Reference]:
     """East, north, up errors against ``reference`` (the mean of the ``solved`` epochs' positions for
     :data:`~overbound.io.geodesy.MEAN_POSITION`), and the reference used."""
+    xyz = _ecef_positions(good, header, source)
+    ref = resolve(reference, *xyz, solved, source)
+    return (*enu_errors_ecef(*xyz, ref), ref)
+
+
+def _ecef_positions(good: pl.DataFrame, header: PosHeader, source: str) -> tuple[np.ndarray, ...]:
+    """The lines' positions as ECEF x, y, z (m): as written, or from latitude/longitude/height (WGS-84,
+    :mod:`pymap3d`; ``geodetic2enu`` goes through ECEF the same way, so the errors are unchanged)."""
     if {"_x-ecef", "_y-ecef", "_z-ecef"} <= set(good.columns):
-        xyz = [good[c].to_numpy() for c in ("_x-ecef", "_y-ecef", "_z-ecef")]
-        ref = resolve(reference, *xyz, solved, source)
-        return (*enu_errors_ecef(*xyz, ref), ref)
+        return tuple(good[c].to_numpy() for c in ("_x-ecef", "_y-ecef", "_z-ecef"))
     if {"_latitude", "_longitude", "_height"} <= set(good.columns):
         llh = [good[c].to_numpy() for c in ("_latitude", "_longitude", "_height")]
-        ref = resolve_geodetic(reference, *llh, solved, source)
-        return (*enu_errors_geodetic(*llh, ref), ref)
+        return tuple(np.asarray(v, float) for v in pymap3d.geodetic2ecef(*llh))
     raise InputError(
         source, "no position columns (latitude/longitude/height or x/y/z-ecef)", line=header.line
     )

@@ -259,6 +259,7 @@ def _header(a: Analysis) -> str:
         f'<header><p class="kicker">GNSS integrity verification report</p><h1>{_e(a.title)}</h1>'
         f'<p class="sub">overbound {_e(__version__)} · verdicts for '
         f"{_e(', '.join(s.name for s in a.services))} · all times GPS time</p>"
+        + (f'<p class="sub">{_e(a.truth["statement"])}</p>' if a.truth else "")
         + "".join(f'<p class="warning" role="alert">{_e(w)}</p>' for w in a.warnings)
         + "</header>"
         f'<nav class="sticky" aria-label="Contents"><ul>{links}</ul></nav>'

@@ -187,6 +187,7 @@ def summary_dict(
         "overbound_version": __version__,
         "title": analysis.title,
         **({"warnings": list(analysis.warnings)} if analysis.warnings else {}),
+        **({"truth_trajectory": analysis.truth} if analysis.truth else {}),
         "inputs": [_input_dict(r) for r in analysis.reports],
         "verdicts": verdicts_dict(assessment.services) if assessment else {},
         "verdicts_by_station": (
