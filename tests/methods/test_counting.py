@@ -256,3 +256,14 @@ def test_continuity_risks_of_many_series_equal_each_alone():
         assert len(many) == avail.shape[0]
         assert many == [continuity_risk(t, a, window_s=window) for a in avail]
     assert continuity_risks(t[:1], avail[:, :1], window_s=15.0)[0].reason == "fewer than two epochs"
+
+
+def test_continuity_says_when_the_data_are_shorter_than_the_window():
+    from overbound.methods.counting import continuity_risk
+
+    t = np.arange(300, dtype=np.int64) * 1_000_000
+    short = continuity_risk(t, np.ones(300, bool), window_s=3600.0)
+    assert short.risk is None and short.n_truncated == 300
+    assert "shorter than the 3600 s window" in short.reason
+    none_up = continuity_risk(t, np.zeros(300, bool), window_s=15.0)
+    assert none_up.risk is None and none_up.reason == "no window starts on an available epoch"

@@ -444,8 +444,15 @@ def continuity_result(
         window_s,
         interval_s,
         n_off_grid,
-        "" if n else "no window starts on an available epoch",
+        "" if n else _no_window(n_truncated, window_s),
     )
+
+
+def _no_window(n_truncated: int, window_s: float) -> str:
+    """Why no window was counted: none starts on an available epoch, or every one runs past the data."""
+    if n_truncated:
+        return f"the data are shorter than the {window_s:g} s window: all {n_truncated} run past the end"
+    return "no window starts on an available epoch"
 
 
 def no_grid_continuity(interval_s: float | None, n_off_grid: int, window_s: float) -> ContinuityResult | None:
