@@ -248,29 +248,22 @@ def run_sbas(
 
     pa = opt.mode == "PA"
     flag(~np.isfinite(pr), "no_pseudorange")
-    seg_epoch, lost = _message_loss(ctx, m)
-    flag(lost & pa, "messages_lost")  # DO-229D 2.1.1.4.12: 4 lost messages end PA/APV only
-    mask = _mask_state(ctx, m)
-    for name, cond in mask.flags:
+    # What depends on the time and the satellite only (messages in force, fast and long-term
+    # corrections) is computed once per (time, PRN) and gathered to the rows: with many points (the
+    # maps) the same satellite is a row of every point. Element by element the same arithmetic.
+    sat, rows = _satellite_rows(ctx) if point is not None else (ctx, None)
+    state = _satellite_state(sat, m, eph, pa)
+    if rows is not None:
+        state = _gather(state, rows)
+    for name, cond in state.pop("flags"):
         flag(cond, name)
-    mt10 = _latest(ctx, m.degradation, 10)
-    mt10_out = (mt10 >= 0) & ctx.timed_out(m.degradation, mt10, 10)
-    flag((mt10 < 0) & pa, "no_mt10")
-    flag(mt10_out & pa, "mt10_timeout")
-    no_mt10 = (mt10 < 0) | mt10_out  # NPA only from here on: sigma_flt with the 8 m term, no degradation
-    r10 = np.where(no_mt10, -1, mt10)  # NaN (absent terms) and the fill of no MT 10 read as 0
-    deg = _Degradation(m.degradation, r10)
-    del mt10, mt10_out, r10
-    # Intermediates are dropped (del, pop) once consumed: a day at 1 Hz is ~850,000 rows, 6.8 MB per
-    # float column, and the peak memory is what is alive when the geometry and the grid are computed.
-    fast = _fast(ctx, m, mask, seg_epoch, deg)
-    del seg_epoch, lost
-    for name, cond in fast.pop("flags"):
-        flag(cond, name)
+    mask, no_mt10 = state.pop("mask"), state.pop("no_mt10")
+    deg = _Degradation(m.degradation, state.pop("r10"))
+    fast, ltc = state.pop("fast"), state.pop("ltc")
+    del state
     du = _delta_udre(ctx, m, mask, where)
     for name, cond in du["flags"]:
         flag(cond & pa, name)
-    ltc = _long_term(ctx, m, mask, deg, eph)
     del mask
     for name, cond in ltc.pop("flags"):
         flag(cond, name)
@@ -389,6 +382,59 @@ def run_sbas(
         n_klob = "no coefficients" if broadcast is None else int((broadcast & (reason == 0)).sum())
         counts["klobuchar"] = n_klob
     return SbasResult(epochs=epochs, satellites=sats, counts=counts)
+
+
+def _satellite_state(ctx: _Context, m: SbasMessages, eph: pl.DataFrame, pa: bool) -> dict:
+    """The messages in force and the corrections of each row's satellite at its time: ``flags`` (in
+    :func:`run_sbas`'s order of precedence, up to the fast corrections'), ``mask``, ``no_mt10``, ``r10``
+    (the MT 10 row in force, -1 for none), ``fast`` and ``ltc`` (its own ``flags``, which come after
+    delta-UDRE's)."""
+    flags = []
+    seg_epoch, lost = _message_loss(ctx, m)
+    flags.append(("messages_lost", lost & pa))  # DO-229D 2.1.1.4.12: 4 lost messages end PA/APV only
+    mask = _mask_state(ctx, m)
+    flags += mask.flags
+    mt10 = _latest(ctx, m.degradation, 10)
+    mt10_out = (mt10 >= 0) & ctx.timed_out(m.degradation, mt10, 10)
+    flags += [("no_mt10", (mt10 < 0) & pa), ("mt10_timeout", mt10_out & pa)]
+    no_mt10 = (mt10 < 0) | mt10_out  # NPA only from here on: sigma_flt with the 8 m term, no degradation
+    r10 = np.where(no_mt10, -1, mt10)  # NaN (absent terms) and the fill of no MT 10 read as 0
+    deg = _Degradation(m.degradation, r10)
+    del mt10, mt10_out
+    # Intermediates are dropped (del, pop) once consumed: a day at 1 Hz is ~850,000 rows, 6.8 MB per
+    # float column, and the peak memory is what is alive when the geometry and the grid are computed.
+    fast = _fast(ctx, m, mask, seg_epoch, deg)
+    del seg_epoch, lost
+    flags += fast.pop("flags")
+    ltc = _long_term(ctx, m, mask, deg, eph)
+    return {"flags": flags, "mask": mask, "no_mt10": no_mt10, "r10": r10, "fast": fast, "ltc": ltc}
+
+
+def _satellite_rows(ctx: _Context) -> tuple[_Context, np.ndarray]:
+    """A context of the distinct (time, PRN) pairs of ``ctx``'s rows, and each row's pair."""
+    key = (ctx.t - ctx.t.min()) * 256 + ctx.prn
+    first, rows = np.unique(key, return_index=True, return_inverse=True)[1:]
+    t, prn = ctx.t[first], ctx.prn[first]
+    new_epoch = np.ones(t.size, bool)
+    new_epoch[1:] = t[1:] != t[:-1]
+    sat = _Context(t=t, prn=prn, opt=ctx.opt, base=ctx.base, epoch=np.cumsum(new_epoch) - 1,
+                   epochs_us=t[new_epoch])  # fmt: skip
+    return sat, rows
+
+
+def _gather(value, rows: np.ndarray):
+    """``value`` with every per-row array taken at ``rows`` (through dicts, lists, pairs and the mask)."""
+    if isinstance(value, np.ndarray):
+        return value[rows]
+    if isinstance(value, dict):
+        return {k: _gather(v, rows) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_gather(v, rows) for v in value]
+    if isinstance(value, tuple):
+        return tuple(_gather(v, rows) for v in value)
+    if isinstance(value, _Mask):
+        return _Mask(*(_gather(getattr(value, f), rows) for f in _Mask.__slots__))
+    return value
 
 
 def grid_iono_available(
