@@ -801,7 +801,8 @@ def _delta_udre(ctx: _Context, m: SbasMessages, mask: _Mask, where: _Where) -> d
     flags: list = []
     if s.height:
         if where.many:  # the MT 27 region holding each receiver: the sets per point
-            v_set, t_set = _service_sets(s, m.service_regions, where.point_lat, where.point_lon)
+            v_set, t_set = _service_sets(s, m.service_regions, where.point_lat, where.point_lon,
+                                         needed=np.unique(r27[r27 >= 0]))  # fmt: skip
             v = np.concatenate([v_set, np.full((v_set.shape[0], 1), np.nan)], axis=1)[where.point_row, r27]
         else:
             v_set, t_set = _service_sets(s, m.service_regions, where.lat, where.lon)
@@ -827,11 +828,17 @@ def _delta_udre(ctx: _Context, m: SbasMessages, mask: _Mask, where: _Where) -> d
 
 
 def _service_sets(
-    s: pl.DataFrame, regions: pl.DataFrame, lat: float | np.ndarray, lon: float | np.ndarray
+    s: pl.DataFrame,
+    regions: pl.DataFrame,
+    lat: float | np.ndarray,
+    lon: float | np.ndarray,
+    needed: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """After each MT 27, the delta-UDRE at each user (``lat``, ``lon``: (u,) deg) from the newest complete
     IODS set, (u, messages) ((messages,) for one user given as scalars), and the time of that set's oldest
-    message (NaN and 0 when no set is complete) (DO-229D A.4.4.13).
+    message (NaN and 0 when no set is complete) (DO-229D A.4.4.13). ``needed``: the messages whose
+    values are wanted (the others stay NaN): the sets are followed through every message, but the users'
+    regions are evaluated for those only (a chunk of a map needs a few of a day's messages).
 
     A set is complete once messages 1..n_messages of one IODS are held; until a new IODS is complete the
     previous complete set stays in force. The user takes the region of highest priority code that
@@ -841,15 +848,22 @@ def _service_sets(
     scalar = np.ndim(lat) == 0
     lat, lon = np.atleast_1d(np.asarray(lat, float)), np.atleast_1d(np.asarray(lon, float))
     st = times_us(s["time"])
-    inside = _in_regions(regions, lat[:, None], lon[:, None])  # (users, regions)
     reg_t = times_us(regions["time"])
     cols = {c: s[c].to_numpy() for c in ("iods", "n_messages", "message_number", "priority")}
     din, dout = s["dudre_in"].to_numpy(), s["dudre_out"].to_numpy()
+    wanted = np.ones(s.height, bool) if needed is None else np.isin(np.arange(s.height), needed)
     held: dict[int, dict[int, int]] = {}  # IODS -> message number -> row
     value = np.full((lat.size, s.height), np.nan)
     t_set = np.zeros(s.height, np.int64)
     current: tuple[tuple[int, ...], int, int] | None = None  # rows, oldest time, message completing it
-    hits: dict[tuple[int, ...], np.ndarray] = {}  # per set: which of its messages' regions hold each user
+    inside: dict[int, np.ndarray] = {}  # per message: which users its regions hold
+
+    def inside_of(x: int) -> np.ndarray:
+        if x not in inside:
+            own = regions.filter(pl.Series(reg_t == st[x]))
+            inside[x] = _in_regions(own, lat[:, None], lon[:, None]).any(axis=1)
+        return inside[x]
+
     for k in range(s.height):
         iods = int(cols["iods"][k])
         held.setdefault(iods, {})[int(cols["message_number"][k])] = k
@@ -858,17 +872,16 @@ def _service_sets(
             current = (tuple(rows), int(st[np.asarray(rows)].min()), k)  # type: ignore[arg-type]
         if current is None:
             continue
+        t_set[k] = current[1]
+        if not wanted[k]:
+            continue
         rows_a = np.asarray(current[0])
-        hit = hits.get(current[0])
-        if hit is None:
-            hit = np.stack([inside[:, reg_t == st[x]].any(axis=1) for x in rows_a], axis=1)  # (users, set)
-            hits[current[0]] = hit
+        hit = np.stack([inside_of(int(x)) for x in rows_a], axis=1)  # (users, set)
         pri = cols["priority"][rows_a].astype(np.int64)
         top = np.where(hit, pri, -1).max(axis=1)  # priority codes are 0-3
         best = hit & (pri == top[:, None])
         out = dout[current[2]]  # delta-UDRE_out of the message that completed the set
         value[:, k] = np.where(hit.any(axis=1), np.where(best, din[rows_a], np.inf).min(axis=1), out)
-        t_set[k] = current[1]
     return (value[0] if scalar else value), t_set
 
 
