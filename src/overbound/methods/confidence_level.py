@@ -22,6 +22,7 @@ import numpy as np
 import polars as pl
 
 from overbound.io.schema import InputError, as_numpy
+from overbound.jsontext import IsoTimes
 from overbound.stats.confidence import confidence_level, ideal_pl, pl_at_confidence
 from overbound.stats.dependence import select_spaced
 from overbound.stats.overbounding import SigmaInflation, sigma_inflation
@@ -79,7 +80,8 @@ class ConfidenceBin:
     or the errors are all equal.)
     max_abs_error : largest |error| among the samples (|VPE| or HPE) (m); the largest in the band.
     max_ratio : largest |error| / PL among the samples.
-    epochs : the samples' GPS times, ISO 8601 (millisecond precision), sorted.
+    epochs : the samples' GPS times, ISO 8601 (millisecond precision), sorted; an
+        :class:`~overbound.jsontext.IsoTimes` (integers, formatted when read or written).
     sufficient : ``n >= min_samples``.
     tolerance_used : the half-width of the band used (m), after widening.
     n_candidates : epochs with a solution in the band, before the spacing.
@@ -99,7 +101,7 @@ class ConfidenceBin:
     pl_99: float
     max_abs_error: float
     max_ratio: float
-    epochs: tuple[str, ...]
+    epochs: IsoTimes
     sufficient: bool
     tolerance_used: float
     n_candidates: int
@@ -112,7 +114,7 @@ class ConfidenceBin:
         for name in cls.__dataclass_fields__:
             v = d[name]
             if name == "epochs":
-                v = tuple(v)
+                v = IsoTimes.parse(v)
             elif name in ("n", "n_candidates"):
                 v = int(v)
             elif name in ("sufficient", "suspect"):
@@ -648,7 +650,7 @@ def _band_statistics(
         pl_99=pl_99,
         max_abs_error=float(error.max()) if n else nan,
         max_ratio=float(ratio.max()) if n else nan,
-        epochs=tuple(np.datetime_as_string(data.time_us[chosen].astype("datetime64[us]"), unit="ms")),
+        epochs=IsoTimes(data.time_us[chosen]),
         sufficient=n >= min_samples,
         tolerance_used=float(width),
         n_candidates=n_cand,

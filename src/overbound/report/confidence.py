@@ -1,7 +1,7 @@
 """Outputs of the PL confidence-level analysis: JSON, figures and an HTML section.
 
 * ``confidence-<axis>.json`` (schema ``overbound.confidence/1``): :func:`confidence_dict`,
-  :func:`write_confidence`; deterministic bytes (:func:`overbound.report.json.dumps`).
+  :func:`write_confidence`; deterministic bytes (:func:`overbound.jsontext.dump`).
 * Figures, drawn like those of :mod:`overbound.report.figures` (inside :func:`style`, on a
   :func:`new_figure` when no ``ax`` is given, never through pyplot): the confidence level per
   target PL (:func:`plot_confidence`, Comby et al. 2003 figure 6), the error histogram of a band
@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
 
 import numpy as np
@@ -25,7 +25,7 @@ from matplotlib.axes import Axes
 from matplotlib.ticker import FixedLocator, FuncFormatter, NullLocator
 
 from overbound import __version__
-from overbound.jsontext import dumps
+from overbound.jsontext import dump
 from overbound.methods.confidence_level import (
     SUSPECT_BELOW,
     ConfidenceAnalysis,
@@ -113,15 +113,13 @@ def confidence_dict(analysis: ConfidenceAnalysis) -> dict:
         },
         "suspect_targets": [bins[i].target for i in analysis.suspect],
         "worst_target": None if worst is None else bins[worst].target,
-        "bins": [asdict(b) for b in bins],
+        "bins": [{f.name: getattr(b, f.name) for f in fields(b)} for b in bins],  # shallow: epochs stay lazy
     }
 
 
 def write_confidence(analysis: ConfidenceAnalysis, path: str | Path) -> Path:
     """Write :func:`confidence_dict` as JSON (same analysis, same bytes); return the path."""
-    path = Path(path)
-    path.write_text(dumps(confidence_dict(analysis)), encoding="utf-8")
-    return path
+    return dump(confidence_dict(analysis), path)
 
 
 # ---------------------------------------------------------------------------
