@@ -33,7 +33,7 @@ def test_example_files_exist(name):
 
 
 def test_help_and_version_exit_zero_from_the_console_script():
-    """Through the installed entry point, as a user types it (click's Exit must not become an error)."""
+    """In a fresh interpreter (``python -m overbound``), as a user runs it: click's Exit is no error."""
     import subprocess
     import sys
 

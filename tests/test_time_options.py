@@ -76,3 +76,12 @@ def test_a_utc_window_is_the_gps_window_14_s_later(tmp_path: Path):
 def test_utc_start_to_the_second(tmp_path: Path, start: str, first: str):
     """USLO has an epoch every 30 s: 00:29:46 UTC is 00:30:00 GPST, one second later is past it."""
     assert _epochs(tmp_path, "w", "--start", start)["start"].startswith(f"2006-12-27T{first}")
+
+
+def test_a_window_that_leaves_no_epoch_is_one_line(tmp_path: Path):
+    run = CliRunner().invoke(main, ["analyze", USLO, "--reference", "35.311803,-120.661092,134.6419",
+                                    "--start", "2007-01-01", "-o", str(tmp_path / "out")])  # fmt: skip
+    assert (
+        run.exit_code == 2 and "no epoch left to analyse" in run.output and "outside_time_range" in run.output
+    )
+    assert not (tmp_path / "out").exists()

@@ -141,6 +141,9 @@ def load_epochs(
     if len(tables) > 1:
         table = table.sort(["station", "time"], maintain_order=True)
     name = ", ".join(source_name(s) for s in inputs) if len(inputs) > 1 else source_name(inputs[0])
+    if table.height == 0:
+        why = "; ".join(f"{r.source}: {r.rows_read} read, rejected {dict(r.rejected)}" for r in reports)
+        raise InputError(name, f"no epoch left to analyse ({why})")
     table = validate_epochs(table, name)
     # One chunk per column: the counting then reads zero-copy numpy views of the table
     # instead of concatenated copies (a Parquet read gives one chunk per row group).
@@ -208,8 +211,8 @@ def analyze(
         if any(x is not None for x in (reference, station, mapping)) or strict:
             raise InputError(
                 str(inputs[0]),
-                "a dataset is read as ingested: give --reference, --station, --column and --strict to "
-                "'overbound ingest' instead",
+                "a dataset is read as ingested: give --reference (or --truth), --station, --column and "
+                "--strict to 'overbound ingest' instead",
             )
         return _analyze_campaign(
             Path(inputs[0]),
@@ -286,7 +289,9 @@ IMPLAUSIBLE_MEDIAN_HPE_M = 50.0
 IMPLAUSIBLE_MEDIAN_VPE_M = 50.0
 
 
-def input_warnings(table: pl.DataFrame, reference: Reference | MeanPosition | None) -> tuple[str, ...]:
+def input_warnings(
+    table: pl.DataFrame, reference: Reference | MeanPosition | Truth | None
+) -> tuple[str, ...]:
     r"""What the report must say first about the errors of ``table``: that they are against the mean
     position (``reference`` :data:`~overbound.io.geodesy.MEAN_POSITION`), and whether their scale is
     implausible (median HPE above :data:`IMPLAUSIBLE_MEDIAN_HPE_M` or median \|VPE\| above
@@ -304,11 +309,17 @@ def input_warnings(table: pl.DataFrame, reference: Reference | MeanPosition | No
         pl.col("hpe").filter(solved).median(), pl.col("vpe").abs().filter(solved).median()
     ).row(0)
     if hpe is not None and (hpe > IMPLAUSIBLE_MEDIAN_HPE_M or vpe > IMPLAUSIBLE_MEDIAN_VPE_M):
-        check = (
-            "Check the reference position (a height in feet, a sign, another station's coordinates)"
-            if reference is not None
-            else "Check the input's errors (their unit, and the position they were computed against)"
-        )
+        from overbound.io.truth import Truth
+
+        if isinstance(reference, Truth):
+            check = (
+                "Check the truth trajectory (UTC times labelled as GPS time put it 18 s times the speed "
+                "off; heights above the geoid, not the ellipsoid; another datum or another run)"
+            )
+        elif reference is not None:
+            check = "Check the reference position (a height in feet, a sign, another station's coordinates)"
+        else:
+            check = "Check the input's errors (their unit, and the position they were computed against)"
         out.append(
             f"The median HPE is {hpe:.3g} m and the median |VPE| {vpe:.3g} m: implausible for a GNSS "
             f"receiver. {check}; every integrity result below rests on it."
@@ -414,12 +425,15 @@ def _analyze_campaign(
         _release(client)
         par = _campaign_parametric(parts, levels, methods, client, time_range, progress, failures)
     _release(client)
+    warnings, truth = _campaign_basis(read_manifest(dataset))
     return Analysis(
         pl.DataFrame(),
         (report,),
         levels,
         network.counting,
         title or dataset.name,
+        warnings=warnings,
+        truth=truth,
         confidence=cl,
         evt=evt_done[0],
         evt_failures=evt_done[1],
@@ -429,6 +443,23 @@ def _analyze_campaign(
         network=network,
         band_confidences=bands,
     )
+
+
+def _campaign_basis(manifest: dict) -> tuple[tuple[str, ...], dict | None]:
+    """What a dataset's errors rest on, from its manifest: a warning for the stations ingested against
+    their mean position, and the truth trajectories of those ingested with one."""
+    stations = manifest.get("stations", {})
+    mean = sorted(name for name, e in stations.items() if e.get("reference") == "mean")
+    warnings = (
+        (f"Errors of {', '.join(mean)} are against the mean of each input's own positions, not a surveyed "
+         "position: a constant bias of the receiver is invisible, and the integrity results are "
+         "optimistic to that extent.",) if mean else ()
+    )  # fmt: skip
+    truths = {name: e["truth"] for name, e in sorted(stations.items()) if e.get("truth")}
+    if not truths:
+        return warnings, None
+    said = "; ".join(f"{name}: " + " ".join(t["statement"] for t in ts) for name, ts in truths.items())
+    return warnings, {"statement": said, "stations": truths}
 
 
 def _band_confidences(cl, levels, client, progress) -> dict:

@@ -561,7 +561,7 @@ def count_campaign(
     positions = {
         name: (float(entry["reference"][0]), float(entry["reference"][1]))
         for name, entry in read_manifest(dataset).get("stations", {}).items()
-        if name in counting.stations and entry.get("reference")
+        if name in counting.stations and isinstance(entry.get("reference"), list)  # not "mean", "truth"
     }
     return CampaignCounting(
         counting,

@@ -110,8 +110,8 @@ class _Group(click.Group):
     def invoke(self, ctx: click.Context):
         try:
             return super().invoke(ctx)
-        except click.exceptions.Exit:  # --help and --version: a RuntimeError since click 8.2, not a failure
-            raise
+        except (click.exceptions.Exit, click.exceptions.Abort):  # RuntimeErrors since click 8.2: --help,
+            raise  # --version, Ctrl-C are not input errors
         except (InputError, OutputError) as exc:
             _fail(str(exc))
         except (ValueError, ArithmeticError, RuntimeError) as exc:

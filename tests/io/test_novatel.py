@@ -162,3 +162,22 @@ def test_analyze_reads_it_pl_only_and_with_the_mean_reference(tmp_path):
     solved = int((table["hpe"].is_finite() & table["hpl"].is_finite()).sum())
     assert doc["epochs"]["with_solution"] == solved == 277 and doc["epochs"]["invalidated"] == 10
     assert 0 < doc["accuracy"]["hpe95"] < 3 and 0 < doc["accuracy"]["vpe95"] < 5
+
+
+def test_ascii_log_places_are_lines_and_binary_ones_bytes():
+    text = gzip.decompress(ASC.read_bytes())
+    with pytest.raises(InputError) as info:
+        read_novatel(io.BytesIO(text), strict=True)
+    line = int(str(info.value).split("(line ")[1].rstrip(")"))
+    bad = text.splitlines()[line - 1]
+    star = bad.index(b"*")  # the corrupt record, found by its line: its CRC-32 fails
+    assert bad.startswith(b"#RAIMSTATUSA") and _novatel_crc(bad[1:star]) != int(bad[star + 1 :], 16)
+    with pytest.raises(InputError, match=r"\(byte \d+\)"):
+        read_novatel(io.BytesIO(gzip.decompress(BIN.read_bytes())), strict=True)
+
+
+def test_raimstatus_without_bestpos_is_refused():
+    text = gzip.decompress(ASC.read_bytes())
+    raim_only = b"\r\n".join(ln for ln in text.splitlines() if ln.startswith(b"#RAIMSTATUSA"))
+    with pytest.raises(InputError, match="no BESTPOS log"):
+        read_novatel(io.BytesIO(raim_only))

@@ -240,3 +240,37 @@ def test_statement_without_stream_digest():
     stream = io.StringIO("gps_seconds,x,y,z\n10,6378137,0,0\n11,6378137,0,0\n")
     truth = read_truth(stream)
     assert truth.sha256 == "" and "2 samples" in truth.statement()
+
+
+def test_a_truth_that_misses_the_input_is_one_line(tmp_path):
+    """A truth of another day (or UTC written as GPS time over a short run): no traceback, no empty table."""
+    novatel = Path(__file__).parents[1] / "data" / "novatel" / "bestpos_raimstatus.asc.gz"  # 2024
+    run = CliRunner().invoke(main, ["analyze", str(novatel), "--truth", str(DATA / "rover-truth.pos.gz"),
+                                    "-o", str(tmp_path / "out")])  # fmt: skip
+    assert run.exit_code == 2 and "no epoch inside the span of the truth trajectory" in run.output, run.output
+    assert "Traceback" not in run.output and not (tmp_path / "out").exists()
+
+
+def test_a_dataset_ingested_with_a_truth_says_so_when_analysed(tmp_path):
+    """The manifest keeps the truth's summary; the dataset's report and summary.json state it."""
+    ds, out = tmp_path / "ds", tmp_path / "out"
+    run = CliRunner().invoke(main, ["ingest", str(ds), str(DATA / "rover.pos.gz"), "--truth",
+                                    str(DATA / "rover-truth.pos.gz")])  # fmt: skip
+    assert run.exit_code == 0, run.output
+    station = json.loads((ds / "dataset.json").read_text())["stations"]["rover"]
+    assert station["reference"] == "truth" and station["truth"][0]["file"] == "rover-truth.pos.gz"
+    run = CliRunner().invoke(main, ["analyze", str(ds), "-o", str(out), "--workers", "0", "--counting-only"])
+    assert run.exit_code == 0, run.output
+    doc = json.loads((out / "summary.json").read_text())
+    assert doc["truth_trajectory"]["stations"]["rover"][0]["sha256"] == station["truth"][0]["sha256"]
+    assert "rover-truth.pos.gz" in (out / "report.html").read_text()
+
+
+def test_a_dataset_ingested_against_the_mean_warns_when_analysed(tmp_path):
+    ds, out = tmp_path / "ds", tmp_path / "out"
+    run = CliRunner().invoke(main, ["ingest", str(ds), str(USLO), "--reference", "mean"])
+    assert run.exit_code == 0, run.output
+    run = CliRunner().invoke(main, ["analyze", str(ds), "-o", str(out), "--workers", "0", "--counting-only"])
+    assert run.exit_code == 0, run.output
+    doc = json.loads((out / "summary.json").read_text())
+    assert any("against the mean" in w for w in doc["warnings"])

@@ -156,11 +156,6 @@ def test_real_old_log_without_navpl():
     )
 
 
-def test_reference_is_required():
-    with pytest.raises(InputError, match=r"pvt_pl_timegps.ubx: .*pass reference="):
-        read_ubx(DATA / "pvt_pl_timegps.ubx")
-
-
 def test_no_position_and_no_week_anywhere():
     """NAV-PL alone cannot be dated."""
     data = (DATA / "pvt_pl_timegps.ubx").read_bytes()

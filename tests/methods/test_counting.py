@@ -267,3 +267,11 @@ def test_continuity_says_when_the_data_are_shorter_than_the_window():
     assert "shorter than the 3600 s window" in short.reason
     none_up = continuity_risk(t, np.zeros(300, bool), window_s=15.0)
     assert none_up.risk is None and none_up.reason == "no window starts on an available epoch"
+    last_up = np.zeros(300, bool)
+    last_up[-5:] = True  # windows fit in the data, but only the last five epochs start one
+    late = continuity_risk(t, last_up, window_s=15.0)
+    assert (
+        late.risk is None
+        and late.n_truncated == 5
+        and late.reason == "no window starts on an available epoch"
+    )

@@ -10,6 +10,13 @@ from pathlib import Path
 import numpy as np
 import polars as pl
 
+from overbound.io.geodesy import (
+    MeanPosition,
+    Reference,
+    enu_errors_geodetic,
+    reference_text,
+    resolve_geodetic,
+)
 from overbound.io.gpstime import PLAUSIBLE_END_US, PLAUSIBLE_SPAN, PLAUSIBLE_START_US
 from overbound.io.schema import COLUMNS, InputError, ReadReport, as_numpy
 
@@ -49,12 +56,25 @@ def _reason_key(reason: str) -> str:
     return reason.split(":", 1)[0].strip().replace(" ", "_")
 
 
-def need_reference(reference, source: str, fmt: str) -> None:
-    """The readers of positions (UBX, SBF, NMEA, SBP) form errors only against a reference."""
+def errors_against(
+    reference: Reference | MeanPosition | None, llh: list[np.ndarray], solved: np.ndarray, name: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, Reference | None]:
+    """East, north, up errors of the positions ``llh`` (deg, deg, ellipsoidal m) of the readers of
+    positions (UBX, SBF, NovAtel, NMEA, SBP) against ``reference`` (``MEAN_POSITION``: the mean of the
+    ``solved`` epochs), and the reference used. Without a reference the log is read without truth:
+    NaN errors and ``None``, and the protection levels are analysed alone (the PL-only analysis)."""
     if reference is None:
-        raise InputError(
-            source, f"{fmt} logs hold positions, not errors: pass reference= (the true antenna position)"
-        )
+        nan = np.full(np.shape(llh[0]), np.nan)
+        return nan, nan.copy(), nan.copy(), None
+    used = resolve_geodetic(reference, *llh, solved, name)
+    return (*enu_errors_geodetic(*llh, used), used)
+
+
+def reference_note(reference: Reference | MeanPosition | None, used: Reference | None) -> str:
+    """The reader's note of what its errors are against (:func:`errors_against`)."""
+    if used is None:
+        return "no reference: errors unknown, protection levels analysed alone"
+    return f"errors against reference {reference_text(reference, used)}"
 
 
 def file_station(station: str | None, source: str) -> str:

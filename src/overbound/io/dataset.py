@@ -285,8 +285,13 @@ def _record(
     stations = manifest.setdefault("stations", {})
     for name in table["station"].unique().sort().to_list():
         entry = stations.setdefault(name, {"reference": None})
-        if isinstance(reference, Reference):  # not the mean position: each input's own, in its notes
+        if isinstance(reference, Reference):
             entry["reference"] = [reference.lat_deg, reference.lon_deg, reference.height_m]
+        elif isinstance(reference, MeanPosition):  # each input's own mean, in its notes
+            entry["reference"] = "mean"
+        elif hasattr(reference, "statement"):  # a truth trajectory (io.truth imports this module)
+            entry["reference"] = "truth"
+            entry.setdefault("truth", []).append({"statement": reference.statement(), **reference.summary()})
     manifest.setdefault("inputs", []).append(
         {
             "reports": [r.to_dict() for r in reports],

@@ -33,13 +33,17 @@ import numpy as np
 import polars as pl
 from pynmeagps import NMEAMessageError, NMEAParseError, NMEAReader, NMEATypeError
 
-from overbound.io._common import RowLog, file_station, finalize_epochs, need_reference, solution_columns
+from overbound.io._common import (
+    RowLog,
+    errors_against,
+    file_station,
+    finalize_epochs,
+    reference_note,
+    solution_columns,
+)
 from overbound.io.geodesy import (
     MeanPosition,
     Reference,
-    enu_errors_geodetic,
-    reference_text,
-    resolve_geodetic,
 )
 from overbound.io.gpstime import utc_to_gpst
 from overbound.io.open import read_bytes, source_name
@@ -62,7 +66,8 @@ def read_nmea(
     """Read an NMEA log with ``GFA`` sentences into the epoch table (see the module notes).
 
     Raises :class:`InputError` naming the file without a ``GFA`` sentence, without a date (no ``RMC``
-    or ``ZDA``), without ``reference``, or (``strict``) at the first bad sentence, with its line.
+    or ``ZDA``), or (``strict``) at the first bad sentence, with its line.
+    Without ``reference`` the errors are unknown (NaN, ``truth`` false: protection levels alone).
     """
     name = source_name(source)
     log = RowLog(name, strict)
@@ -87,18 +92,21 @@ def read_nmea(
         raise InputError(
             name, "no date: GFA and GGA give the time of day only, and no RMC or ZDA gives the day"
         )
-    need_reference(reference, name, "NMEA")
     log.rows_read = len(found["GFA"]) + log.n_rejected
     table, used = _epochs(found, reference, name)
     counts = f"{len(found['GFA'])} GFA, {len(found['GGA'])} GGA and {len(found['DATE'])} RMC/ZDA sentences"
     notes = [
         f"{counts}; others: " + (", ".join(f"{k} {v}" for k, v in sorted(other.items())) or "none"),
         "UTC times converted to GPS time",
-        f"errors against reference {reference_text(reference, used)}",
+        reference_note(reference, used),
     ]
     stn = file_station(station, name)
     return finalize_epochs(
-        table.with_columns(pl.lit(stn).alias("station")), log, format="nmea", notes=tuple(notes)
+        table.with_columns(pl.lit(stn).alias("station")),
+        log,
+        format="nmea",
+        notes=tuple(notes),
+        errors=used is not None,
     )
 
 
@@ -177,8 +185,7 @@ def _epochs(found: dict, reference, name: str) -> tuple[pl.DataFrame, Reference]
     positioned = (quality > 0) & np.isfinite(llh[0]) & np.isfinite(llh[1]) & np.isfinite(llh[2])
     llh = [np.where(positioned, v, np.nan) for v in llh]
     solved = positioned & np.isfinite(ep["hpl"].to_numpy()) & np.isfinite(ep["vpl"].to_numpy())
-    used = resolve_geodetic(reference, *llh, solved, name)  # the mean of the epochs with a solution
-    e, n, u = enu_errors_geodetic(*llh, used)
+    e, n, u, used = errors_against(reference, llh, solved, name)  # the mean of the epochs with a solution
     utc_us = (ep["day_us"] + ep["tod"]).to_numpy()
     ok_time = np.isfinite(utc_us)
     utc = pl.Series(np.where(ok_time, utc_us, 0).astype(np.int64), dtype=pl.Int64).cast(pl.Datetime("us"))

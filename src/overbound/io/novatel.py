@@ -5,11 +5,14 @@ Reference Manual [1]_).
 Records are framed (CRC-32 checked) and decoded by NovAtel's own library, :mod:`novatel_edie`
 (``novatel_edie.oem.Framer`` then ``Decoder.decode``, whose message database gives the field names and
 enumerations). A stretch of bytes that is no valid record (a failed CRC, garbage, a record cut by the
-end of the file) is one rejected row, with its byte offset; the scan resynchronises on the next record.
+end of the file) is one rejected row, with its place: the line in an ASCII log, the byte offset in a
+log with binary records; the scan resynchronises on the next record.
 Line ends and other blank bytes between records are no rows. The time of a record is the GPS week and
 milliseconds of its header (GPS time); records of the same time make one epoch:
 
-* ``hpl``, ``vpl``: the RAIMSTATUS ``HPL`` and ``VPL`` (m). A level whose status (Table "Protection
+* ``hpl``, ``vpl``: the RAIMSTATUS ``HPL`` and ``VPL`` (m): the protection levels of the receiver's
+  RAIM (NovAtel's NRAIM, set up by the ``RAIMMODE`` command), which need not be the DO-229 SBAS levels
+  that the ICAO service limits were written for; the notes say so. A level whose status (Table "Protection
   Level Status") is ``NOT_AVAILABLE`` is no protection level (the manual's own example logs 0.000
   beside it): NaN, as the Do-Not-Use levels of SBF and SBP, so that epoch is unavailable. A level whose
   status is ``ALERT`` (above the alert limit of the ``RAIMMODE`` command) is a computed level and is
@@ -18,7 +21,8 @@ milliseconds of its header (GPS time); records of the same time make one epoch:
 * the position: BESTPOS ``lat``, ``lon`` (deg) and ``hgt``, the height above mean sea level, plus
   ``undulation`` (the geoid above the ellipsoid), which gives the ellipsoidal height ``hgt +
   undulation`` ([1]_, BESTPOS: "hgt: height above mean sea level", "undulation: the relationship between
-  the geoid and the ellipsoid"; novatel-edie names the field ``orthometric_height``). A solution needs
+  the geoid and the ellipsoid"; novatel-edie names the field ``orthometric_height``), in the datum of
+  ``datum_id`` (epochs in a datum other than WGS84 are counted in the notes). A solution needs
   solution status ``SOL_COMPUTED`` and a position type other than ``NONE``; an epoch without BESTPOS or
   without RAIMSTATUS has no solution (errors and PLs NaN), counted in the notes.
 * errors: against ``reference`` (a surveyed position or ``MEAN_POSITION``). Without one the log is read
@@ -47,14 +51,18 @@ from typing import BinaryIO
 import numpy as np
 import polars as pl
 
-from overbound.io._common import RowLog, file_station, finalize_epochs, solution_columns
+from overbound.io._common import (
+    RowLog,
+    errors_against,
+    file_station,
+    finalize_epochs,
+    reference_note,
+    solution_columns,
+)
 from overbound.io._rinex import GPS_EPOCH_US, US
 from overbound.io.geodesy import (
     MeanPosition,
     Reference,
-    enu_errors_geodetic,
-    reference_text,
-    resolve_geodetic,
 )
 from overbound.io.open import read_bytes, source_name
 from overbound.io.schema import InputError, ReadReport
@@ -83,7 +91,8 @@ def read_novatel(
     name = source_name(source)
     data = read_bytes(source)
     log = RowLog(name, strict)
-    recs, other = _records(data, log)
+    place = _Place(data)
+    recs, other = _records(data, log, place)
     if not recs[_RAIM]:
         pos = recs[_POS]
         waas = sum(1 for r in pos if r["type"] == "WAAS")
@@ -91,21 +100,27 @@ def read_novatel(
             name,
             f"no RAIMSTATUS log: no protection levels ({len(pos)} BESTPOS, {waas} of them WAAS solutions)",
         )
-    pos, raim = (_unique(recs[k], k, log) for k in (_POS, _RAIM))
+    if not recs[_POS]:
+        raise InputError(
+            name, f"no BESTPOS log: no position at the {len(recs[_RAIM])} RAIMSTATUS records (log both)"
+        )
+    pos, raim = (_unique(recs[k], k, log, place) for k in (_POS, _RAIM))
     ep = pos.join(raim, on="_t", how="full", coalesce=True, suffix="_r")
-    ep = ep.with_columns(pl.min_horizontal("_line", "_line_r").alias("_line")).sort("_line")
+    ep = ep.with_columns(pl.min_horizontal("_line", "_line_r").alias("_line"))
+    ep = ep.sort("_line", maintain_order=True)
     log.rows_read = ep.height + log.n_rejected
     table, used = _epochs(ep, reference, name)
     n_pos, n_raim = int(ep["type"].is_null().sum()), int(ep["hpl_status"].is_null().sum())
     notes = [
         f"{len(recs[_POS])} BESTPOS and {len(recs[_RAIM])} RAIMSTATUS records; other logs: "
         + (", ".join(f"{k} {v}" for k, v in sorted(other.items())) or "none"),
-        "protection levels: RAIMSTATUS HPL and VPL; NOT_AVAILABLE ones are none (NaN), ALERT ones kept; "
-        "alert: integrity status FAIL; ellipsoidal height = BESTPOS height above mean sea level + undulation",
-        f"errors against reference {reference_text(reference, used)}"
-        if used is not None
-        else "no reference: errors unknown, protection levels analysed alone",
+        "protection levels: RAIMSTATUS HPL and VPL, the receiver's RAIM levels (RAIMMODE), not necessarily "
+        "DO-229 SBAS levels; NOT_AVAILABLE ones are none (NaN), ALERT ones kept; alert: integrity status "
+        "FAIL; ellipsoidal height = BESTPOS height above mean sea level + undulation",
+        reference_note(reference, used),
     ]
+    if n_other := int((ep["datum"].fill_null("WGS84") != "WGS84").sum()):
+        notes.append(f"{n_other} BESTPOS positions in a datum other than WGS84 (datum_id), used as they are")
     if n_pos or n_raim:
         notes.append(
             f"{n_pos} epochs without BESTPOS and {n_raim} without RAIMSTATUS at their time: no solution"
@@ -141,7 +156,21 @@ def _frames(data: bytes):
         yield off, rest, False
 
 
-def _records(data: bytes, log: RowLog) -> tuple[dict[str, list[dict]], Counter]:
+class _Place:
+    """Where a record starts, as a user finds it: the line of an ASCII log, else the byte offset."""
+
+    def __init__(self, data: bytes) -> None:
+        ascii_only = b"\xaa\x44\x12" not in data
+        self.newlines = np.flatnonzero(np.frombuffer(data, np.uint8) == 10) if ascii_only else None
+
+    def number(self, off: int) -> int:
+        return off if self.newlines is None else int(np.searchsorted(self.newlines, off)) + 1
+
+    def text(self, off: int) -> str:
+        return f"byte {off}" if self.newlines is None else f"line {self.number(off)}"
+
+
+def _records(data: bytes, log: RowLog, place: _Place) -> tuple[dict[str, list[dict]], Counter]:
     """The decoded BESTPOS and RAIMSTATUS records as field dicts; the other logs counted by name; each
     stretch of bytes that gives no record rejected once (its first offset)."""
     import novatel_edie as ne
@@ -156,7 +185,7 @@ def _records(data: bytes, log: RowLog) -> tuple[dict[str, list[dict]], Counter]:
             try:
                 msg = decoder.decode(frame)
             except ne.NovatelEdieException as exc:
-                why = f"bad record: {type(exc).__name__} {exc} (byte {off})"
+                why = f"bad record: {type(exc).__name__} {exc} ({place.text(off)})"
         elif not frame.strip(_BLANK):
             continue  # line ends, padding: between records, not a record
         else:
@@ -166,16 +195,16 @@ def _records(data: bytes, log: RowLog) -> tuple[dict[str, list[dict]], Counter]:
                 if cut
                 else "bad record: no valid record (CRC, syntax)"
             )
-            why += f" (byte {off})"
+            why += f" ({place.text(off)})"
         if msg is None:
             if not in_bad:
-                log.reject(off, why)
+                log.reject(place.number(off), why)
             in_bad = True
             continue
         in_bad = False
         kind = getattr(msg, "name", type(msg).__name__)
         if kind in out and isinstance(msg, ne.oem.Message):
-            out[kind].append(_fields(kind, off, msg))
+            out[kind].append(_fields(kind, place.number(off), msg))
         else:
             other[kind] += 1
     return out, other
@@ -193,23 +222,24 @@ def _fields(kind: str, off: int, m) -> dict:
     h_ell = float(m.height if hgt is None else hgt) + float(m.undulation)
     return {"_line": off, "_t": t, "status": m.solution_status.name, "type": m.position_type.name,
             "lat": float(m.latitude), "lon": float(m.longitude), "h": h_ell,
-            "nsv": int(m.num_soln_svs)}  # fmt: skip
+            "nsv": int(m.num_soln_svs), "datum": m.datum_id.name}  # fmt: skip
 
 
 _SCHEMA = {
     _POS: {"_line": pl.Int64, "_t": pl.Int64, "status": pl.String, "type": pl.String, "lat": pl.Float64,
-           "lon": pl.Float64, "h": pl.Float64, "nsv": pl.Int64},
+           "lon": pl.Float64, "h": pl.Float64, "nsv": pl.Int64, "datum": pl.String},
     _RAIM: {"_line": pl.Int64, "_t": pl.Int64, "integrity": pl.String, "hpl_status": pl.String,
             "hpl": pl.Float64, "vpl_status": pl.String, "vpl": pl.Float64},
 }  # fmt: skip
 
 
-def _unique(rows: list[dict], kind: str, log: RowLog) -> pl.DataFrame:
+def _unique(rows: list[dict], kind: str, log: RowLog, place: _Place) -> pl.DataFrame:
     """One record of ``kind`` per time stamp, the first; a repeated one rejected (``duplicate_record``)."""
     df = pl.DataFrame(rows, schema=_SCHEMA[kind])
     repeated = df.filter(df["_t"].is_duplicated() & ~df["_t"].is_first_distinct())
-    for off in repeated["_line"]:
-        log.reject(int(off), f"duplicate record: a second {kind} of the same time (byte {off})")
+    for line in repeated["_line"]:  # a line or a byte offset (_Place.number)
+        where = f"line {line}" if place.newlines is not None else f"byte {line}"
+        log.reject(int(line), f"duplicate record: a second {kind} of the same time ({where})")
     return df.unique("_t", keep="first", maintain_order=True)
 
 
@@ -217,12 +247,7 @@ def _epochs(ep: pl.DataFrame, reference, name: str) -> tuple[pl.DataFrame, Refer
     positioned = ((ep["status"] == "SOL_COMPUTED") & (ep["type"] != "NONE")).fill_null(False).to_numpy()
     positioned &= ep["hpl_status"].is_not_null().to_numpy()  # no RAIMSTATUS: no solution, as SBF's DOP
     llh = [np.where(positioned, ep[c].fill_null(np.nan).to_numpy(), np.nan) for c in ("lat", "lon", "h")]
-    used = None
-    if reference is not None:
-        used = resolve_geodetic(reference, *llh, positioned, name)
-        e, n, u = enu_errors_geodetic(*llh, used)
-    else:
-        e = n = u = np.full(ep.height, np.nan)
+    e, n, u, used = errors_against(reference, llh, positioned, name)
     hpl = np.where(
         (ep["hpl_status"] != "NOT_AVAILABLE").fill_null(False), ep["hpl"].fill_null(np.nan), np.nan
     )

@@ -35,14 +35,18 @@ import polars as pl
 from pysbf2 import SBFReader
 from pysbf2.exceptions import SBFMessageError, SBFParseError, SBFTypeError
 
-from overbound.io._common import RowLog, file_station, finalize_epochs, need_reference, solution_columns
+from overbound.io._common import (
+    RowLog,
+    errors_against,
+    file_station,
+    finalize_epochs,
+    reference_note,
+    solution_columns,
+)
 from overbound.io._rinex import GPS_EPOCH_US, US
 from overbound.io.geodesy import (
     MeanPosition,
     Reference,
-    enu_errors_geodetic,
-    reference_text,
-    resolve_geodetic,
 )
 from overbound.io.open import read_bytes, source_name
 from overbound.io.schema import InputError, ReadReport
@@ -67,8 +71,9 @@ def read_sbf(
 ) -> tuple[pl.DataFrame, ReadReport]:
     """Read an SBF log into the epoch table (see the module notes).
 
-    Raises :class:`InputError` without ``reference`` (SBF holds positions, not errors), without any
-    PVTGeodetic block, or (``strict``) at the first corrupt block, naming the file and byte offset.
+    Raises :class:`InputError` without any PVTGeodetic block, or (``strict``) at the first corrupt block,
+    naming the file and byte offset.
+    Without ``reference`` the errors are unknown (NaN, ``truth`` false: protection levels alone).
     """
     name = source_name(source)
     data = read_bytes(source)
@@ -76,13 +81,12 @@ def read_sbf(
     blocks, other = _blocks(data, log)
     if not blocks[_PVT]:
         raise InputError(name, "no PVTGeodetic block (4007): no epoch to read")
-    need_reference(reference, name, "SBF")
     log.rows_read = len(blocks[_PVT]) + log.n_rejected
     table, used = _epochs(blocks, reference, name)
     notes = [
         f"{len(blocks[_PVT])} PVTGeodetic and {len(blocks[_DOP])} DOP blocks; other blocks: "
         + (", ".join(f"{k} {v}" for k, v in sorted(other.items())) or "none"),
-        f"errors against reference {reference_text(reference, used)}",
+        reference_note(reference, used),
         "protection levels: the DOP block's HPL and VPL (the receiver's DO-229 levels)",
     ]
     n_no_dop = int(table["_no_dop"].sum())
@@ -90,7 +94,7 @@ def read_sbf(
         notes.append(f"{n_no_dop} epochs without a DOP block: no protection levels (no solution)")
     stn = file_station(station, name)
     table = table.drop("_no_dop").with_columns(pl.lit(stn).alias("station"))
-    return finalize_epochs(table, log, format="sbf", notes=tuple(notes))
+    return finalize_epochs(table, log, format="sbf", notes=tuple(notes), errors=used is not None)
 
 
 def _blocks(data: bytes, log: RowLog) -> tuple[dict[str, list[tuple[int, object]]], Counter]:
@@ -155,8 +159,7 @@ def _epochs(blocks: dict, reference, name: str) -> tuple[pl.DataFrame, Reference
     hpl = ep["hpl_raw"].fill_null(np.nan).to_numpy()
     vpl = ep["vpl_raw"].fill_null(np.nan).to_numpy()
     has_pl = positioned & (hpl != _DNU) & (vpl != _DNU) & np.isfinite(hpl) & np.isfinite(vpl)
-    used = resolve_geodetic(reference, *llh, has_pl, name)  # the mean of the epochs with a solution
-    e, n, u = enu_errors_geodetic(*llh, used)
+    e, n, u, used = errors_against(reference, llh, has_pl, name)  # the mean of the epochs with a solution
     mode = [
         _TYPES.get(t, f"type {t}") + (" DO-229" if d else "")
         for t, d in zip(ep["type"], ep["do229"], strict=True)

@@ -34,14 +34,18 @@ import polars as pl
 from sbp.msg import SBP, UnpackError
 from sbp.table import dispatch
 
-from overbound.io._common import RowLog, file_station, finalize_epochs, need_reference, solution_columns
+from overbound.io._common import (
+    RowLog,
+    errors_against,
+    file_station,
+    finalize_epochs,
+    reference_note,
+    solution_columns,
+)
 from overbound.io._rinex import GPS_EPOCH_US, US
 from overbound.io.geodesy import (
     MeanPosition,
     Reference,
-    enu_errors_geodetic,
-    reference_text,
-    resolve_geodetic,
 )
 from overbound.io.open import read_bytes, source_name
 from overbound.io.schema import InputError, ReadReport
@@ -70,8 +74,9 @@ def read_sbp(
     """Read an SBP log with protection-level messages into the epoch table (see the module notes).
 
     Raises :class:`InputError` naming the file without any protection-level message (its SBAS-mode
-    ``MSG_POS_LLH`` are counted in the message), without ``reference``, or (``strict``) at the first
-    corrupt stretch, with its byte offset.
+    ``MSG_POS_LLH`` are counted in the message), or (``strict``) at the first corrupt stretch, with its
+    byte offset.
+    Without ``reference`` the errors are unknown (NaN, ``truth`` false: protection levels alone).
     """
     name = source_name(source)
     data = read_bytes(source)
@@ -83,18 +88,21 @@ def read_sbp(
         sbas = sum(1 for _, m in llh if m.flags & 7 == 6)
         seen = f"{len(llh)} MSG_POS_LLH, {sbas} in SBAS mode"
         raise InputError(name, f"no MSG_PROTECTION_LEVEL (0x0217 or 0x0216): no protection levels ({seen})")
-    need_reference(reference, name, "SBP")
     log.rows_read = len(pls) + log.n_rejected
     table, used = _epochs(msgs, reference, name)
     notes = [
         f"{len(msgs[_PL])} MSG_PROTECTION_LEVEL, {len(msgs[_PL_DEP_A])} MSG_PROTECTION_LEVEL_DEP_A, "
         f"{len(msgs[_POS_LLH])} MSG_POS_LLH; others: "
         + (", ".join(f"{k} {v}" for k, v in sorted(other.items())) or "none"),
-        f"errors against reference {reference_text(reference, used)}",
+        reference_note(reference, used),
     ]
     stn = file_station(station, name)
     return finalize_epochs(
-        table.with_columns(pl.lit(stn).alias("station")), log, format="sbp", notes=tuple(notes)
+        table.with_columns(pl.lit(stn).alias("station")),
+        log,
+        format="sbp",
+        notes=tuple(notes),
+        errors=used is not None,
     )
 
 
@@ -160,8 +168,7 @@ def _epochs(msgs: dict, reference, name: str) -> tuple[pl.DataFrame, Reference]:
     flags = np.where(dep, flags & 7, flags)
     positioned = (fix != 0) & np.isfinite(ep["lat"].to_numpy()) & np.isfinite(ep["lon"].to_numpy())
     llh = [np.where(positioned, ep[c].to_numpy(), np.nan) for c in ("lat", "lon", "h")]
-    used = resolve_geodetic(reference, *llh, positioned, name)
-    e, n, u = enu_errors_geodetic(*llh, used)
+    e, n, u, used = errors_against(reference, llh, positioned, name)
     wn = ep["wn"].to_numpy(allow_copy=True).astype(float)
     t_us = GPS_EPOCH_US + wn * _WEEK_US + ep["tow"].to_numpy() * 1000.0
     table = pl.DataFrame(

@@ -47,7 +47,6 @@ from pathlib import Path
 import numpy as np
 import polars as pl
 import pymap3d
-from scipy.interpolate import CubicSpline
 
 from overbound.io._common import RowLog
 from overbound.io.geodesy import Reference, enu_errors_along
@@ -180,6 +179,8 @@ class Truth:
         # seconds from the stretch's start: µs since 1970 squared would lose precision in the spline
         ts, ats = (t - t[0]) / _US, (at - t[0]) / _US
         if self.interpolation == "cubic" and t.size >= 4:
+            from scipy.interpolate import CubicSpline  # here: reading without a truth needs no scipy
+
             return CubicSpline(ts, xyz, axis=0)(ats)
         return np.column_stack([np.interp(ats, ts, xyz[:, j]) for j in range(3)])
 
@@ -385,8 +386,16 @@ def apply_truth(table: pl.DataFrame, report: ReadReport, truth: Truth) -> tuple[
             "lat/lon/height, gLAB with OUTPUT lines)",
         )
     anchor = truth.anchor
-    truth_xyz, status = truth.at(as_numpy(table["time"]))
+    times = as_numpy(table["time"])
+    truth_xyz, status = truth.at(times)
     keep = status != _OUTSIDE
+    if times.size and not keep.any():
+        span = " to ".join(str(t)[:23] for t in (times.min(), times.max()))
+        raise InputError(
+            report.source,
+            f"no epoch inside the span of the truth trajectory {truth} ({span} outside it; GPS time, "
+            "or UTC labelled as GPS time?)",
+        )
     table, truth_xyz, status = table.filter(pl.Series(keep)), truth_xyz[keep], status[keep]
     east, north, up = (as_numpy(table[c]).astype(float) for c in ("east", "north", "vpe"))
     solved = np.isfinite(east) & np.isfinite(north) & np.isfinite(up)

@@ -20,13 +20,10 @@ import polars as pl
 from pyubx2 import GET, VALNONE, UBXReader
 from pyubx2.exceptions import UBXMessageError, UBXParseError, UBXTypeError
 
-from overbound.io._common import RowLog, file_station, finalize_epochs, need_reference
+from overbound.io._common import RowLog, errors_against, file_station, finalize_epochs, reference_note
 from overbound.io.geodesy import (
     MeanPosition,
     Reference,
-    enu_errors_geodetic,
-    reference_text,
-    resolve_geodetic,
 )
 from overbound.io.gpstime import leap_seconds
 from overbound.io.open import read_bytes, source_name
@@ -80,8 +77,9 @@ def read_ubx(
     Parameters
     ----------
     source : UBX log (path or binary stream, plain or gzip).
-    reference : true antenna position; required, the errors are the NAV-PVT / NAV-HPPOSLLH
-        positions minus this point in its local east-north-up frame.
+    reference : true antenna position (or ``MEAN_POSITION``); the errors are the NAV-PVT /
+        NAV-HPPOSLLH positions minus this point in its local east-north-up frame. None: errors
+        unknown (NaN, ``truth`` false), the protection levels analysed alone.
     station : station name; by default the file name up to its first dot.
     strict : raise on the first corrupt frame instead of counting it.
 
@@ -96,7 +94,7 @@ def read_ubx(
     Raises
     ------
     InputError
-        No NAV-PL message; ``reference`` missing; no GPS week anywhere in the log; with
+        No NAV-PL message; no GPS week anywhere in the log; with
         ``strict``, a corrupt or truncated frame (``file.ubx:@<byte offset>: bad checksum ...``).
 
     Notes
@@ -168,7 +166,6 @@ def read_ubx(
     # Rows are epochs (NAV-PL messages) plus the frames rejected whole (corrupt, truncated,
     # undecodable), whatever their class: kept + rejected = read. Other frames are noted.
     log.rows_read = len(decoded["NAV-PL"]) + log.n_rejected
-    need_reference(reference, name, "UBX")
     tables = _tables(decoded)
     epochs, notes = _epochs(tables, reference, name)
     stn = file_station(station, name)
@@ -176,7 +173,8 @@ def read_ubx(
     frame_note = "frames: " + ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
     if skipped:
         frame_note += f"; {skipped} bytes outside UBX frames skipped"
-    return finalize_epochs(epochs, log, format="ubx", notes=(frame_note, *notes))
+    truth = reference is not None
+    return finalize_epochs(epochs, log, format="ubx", notes=(frame_note, *notes), errors=truth)
 
 
 def _reject(log: RowLog, offset: int, reason: str) -> None:
@@ -368,8 +366,7 @@ def _epochs(
     fixed = epochs["fix"].to_numpy()
     usable = pl_valid & (fixed | ~positioned)
     llh = [epochs[c].fill_null(np.nan).to_numpy() for c in ("lat", "lon", "h")]
-    used = resolve_geodetic(reference, *llh, usable & positioned, name)
-    e, n, u = enu_errors_geodetic(*llh, used)
+    e, n, u, used = errors_against(reference, llh, usable & positioned, name)
     nan = np.full(epochs.height, np.nan)
     out = (
         epochs.select(
@@ -393,7 +390,7 @@ def _epochs(
     n_hp = int(epochs["use_hp"].sum())
     notes.append(
         f"positions: NAV-HPPOSLLH for {n_hp} epochs, NAV-PVT for {int(positioned.sum()) - n_hp}; "
-        f"errors against reference {reference_text(reference, used)}"
+        + reference_note(reference, used)
     )
     frames = Counter(epochs.filter(pl.col("pl_valid"))["plPosFrame"].to_list())
     if frames:

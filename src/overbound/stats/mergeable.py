@@ -177,6 +177,7 @@ def row_percentiles(x: np.ndarray, valid: np.ndarray, q: float) -> np.ndarray:
     ``a = s[floor(v)]`` and ``b = s[min(floor(v) + 1, n - 1)]`` of the row's ``n`` valid values, and
     its ``_lerp``: ``a + (b - a) g``, or ``b - (b - a)(1 - g)`` when ``g = v - floor(v) >= 0.5``.
     """
+    valid = valid & ~np.isnan(x)  # a NaN is no value, as nanpercentile has it
     s = np.sort(np.where(valid, x, np.nan), axis=1)  # NaN sorts last: the valid values lead each row
     n = np.count_nonzero(valid, axis=1)
     v = (np.maximum(n, 1) - 1) * np.true_divide(q, 100.0)
