@@ -95,3 +95,24 @@ def test_validate_negative_and_order():
 
 def test_empty_table_has_required_columns():
     assert empty_epochs().columns == ["time", "station", "hpe", "vpe", "hpl", "vpl"]
+
+
+def test_a_time_window_recounts_the_invalidated_rows_it_removes(tmp_path):
+    """kept + rejected = read, and the invalidated rows are among the kept ones, after a time window."""
+    import datetime as dt
+
+    from overbound.io.open import read
+
+    t = [f"2024-01-07T00:00:{s:02d}" for s in range(10)]
+    hpl = ["nan", "5", "-1", "5", "5", "nan", "5", "5", "5", "nan"]  # invalidated at 0, 2, 5, 9
+    rows = [f"{a},S,1.0,0.5,{h},8.0" for a, h in zip(t, hpl, strict=True)]
+    path = tmp_path / "rx.csv"
+    path.write_text("time,station,hpe,vpe,hpl,vpl\n" + "\n".join(rows) + "\n")
+    table, whole = read(path)
+    assert whole.invalidated == {"nan_pl": 3, "negative_pl": 1}
+    window = (dt.datetime(2024, 1, 7, 0, 0, 1), dt.datetime(2024, 1, 7, 0, 0, 6))  # seconds 1-5
+    table, cut = read(path, time_range=window)
+    assert (cut.rows_read, cut.rows_kept, cut.rejected) == (10, 5, {"outside_time_range": 5})
+    assert cut.invalidated == {"negative_pl": 1, "nan_pl": 1}  # rows 2 and 5 are inside, 0 and 9 not
+    assert int(table["hpl"].is_nan().sum()) == sum(cut.invalidated.values())
+    assert cut.invalid_rows is None  # the bookkeeping is not carried beyond the read

@@ -127,7 +127,7 @@ def finalize_epochs(
     """
     df = _drop_implausible_times(df, log)
     df = _drop_duplicates_or_raise(df, log)
-    df, invalid = _invalidate(df, log, errors)
+    df, invalid, rows, reasons = _invalidate(df, log, errors)
     cols = [c.name for c in COLUMNS if c.name in df.columns]
     out = df.select([pl.col(c).cast(_DTYPES[c]) for c in cols])
     report = ReadReport(
@@ -140,6 +140,8 @@ def finalize_epochs(
         first_bad=log.first_bad,
         notes=notes,
         truth=errors,
+        invalid_rows=rows,
+        invalid_reasons=reasons,
     )
     return out, report
 
@@ -204,7 +206,11 @@ def _drop_duplicates_or_raise(df: pl.DataFrame, log: RowLog) -> pl.DataFrame:
     return df.filter(pl.Series(keep)) if dup.size else df
 
 
-def _invalidate(df: pl.DataFrame, log: RowLog, errors: bool = True) -> tuple[pl.DataFrame, dict[str, int]]:
+def _invalidate(
+    df: pl.DataFrame, log: RowLog, errors: bool = True
+) -> tuple[pl.DataFrame, dict[str, int], np.ndarray, np.ndarray]:
+    """The table with its unusable solutions made no-solution epochs (rule 3 of :func:`finalize_epochs`),
+    their counts by reason, and their rows and reasons."""
     # An infinite value is no measurement either (an infinite error beside a finite PL would be an HMI).
     checked = ("hpl", "vpl", "hpe", "vpe") if errors else ("hpl", "vpl")
     missing = [(~pl.col(c).is_finite()).fill_null(True) for c in checked]
@@ -215,7 +221,7 @@ def _invalidate(df: pl.DataFrame, log: RowLog, errors: bool = True) -> tuple[pl.
     invalid = ~all_nan & (neg | nan_pl | nan_err)
     # One boolean pass over the table; reasons are spelled out only for the (few) bad rows.
     if not df.select(invalid.any()).item():
-        return df, {}
+        return df, {}, np.zeros(0, np.int64), np.zeros(0, dtype=object)
     reason = (
         pl.when(neg)
         .then(pl.lit("negative_pl"))
@@ -223,11 +229,11 @@ def _invalidate(df: pl.DataFrame, log: RowLog, errors: bool = True) -> tuple[pl.
         .then(pl.lit("nan_pl"))
         .otherwise(pl.lit("nan_error"))
     )
-    bad = df.filter(invalid).select(pl.col("_line"), reason.alias("reason"))
+    bad = df.with_row_index("_row").filter(invalid).select("_row", "_line", reason.alias("reason"))
     counts = dict(bad.group_by("reason").len().sort("reason").iter_rows())
     log._first(int(bad["_line"][0]), f"{bad['reason'][0]}: solution set to no-solution")
     nan = pl.lit(float("nan"))
     df = df.with_columns(
         [pl.when(invalid).then(nan).otherwise(pl.col(c)).alias(c) for c in _SOLUTION if c in df.columns]
     )
-    return df, counts
+    return df, counts, bad["_row"].to_numpy().astype(np.int64), bad["reason"].to_numpy()

@@ -360,12 +360,11 @@ def read(
         keep = set(REQUIRED) | set(columns)
         table = table.select([c for c in table.columns if c in keep])
     if time_range is not None:
-        kept = filter_time(table, time_range)
-        if dropped := table.height - kept.height:  # counted like any row not kept
-            rejected = {**report.rejected, "outside_time_range": dropped}
-            report = dataclasses.replace(report, rows_kept=kept.height, rejected=rejected)
-        table = kept
-    return table, report
+        inside = table.select(_in_window(time_range)).to_series().to_numpy()
+        # counted like any row not kept; the invalidated ones among them no longer count as invalidated
+        report = report.keep(inside, "outside_time_range")
+        table = table.filter(pl.Series(inside))
+    return table, dataclasses.replace(report, invalid_rows=None, invalid_reasons=None)
 
 
 def _read_one(
@@ -394,10 +393,14 @@ def filter_time(
     table: pl.DataFrame, time_range: tuple[dt.datetime | None, dt.datetime | None]
 ) -> pl.DataFrame:
     """The epochs with ``start <= time < stop`` (either end ``None``: open)."""
+    return table.filter(_in_window(time_range))
+
+
+def _in_window(time_range: tuple[dt.datetime | None, dt.datetime | None]) -> pl.Expr:
     start, stop = time_range
     expr = pl.lit(True)
     if start is not None:
         expr = expr & (pl.col("time") >= start)
     if stop is not None:
         expr = expr & (pl.col("time") < stop)
-    return table.filter(expr)
+    return expr

@@ -23,7 +23,7 @@ protection levels; they count as unavailable for every service.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 
 import numpy as np
@@ -122,6 +122,9 @@ class ReadReport:
     notes : free-form remarks (e.g. the reference position used).
     truth : False when the input has no truth (a flight log without a reference trajectory): its
         errors are unknown (NaN) beside valid protection levels, and only what the PLs give is analysed.
+    invalid_rows, invalid_reasons : while the table is being read, the rows (of the returned table)
+        that were invalidated and why, so that removing rows afterwards (a time window, a truth's
+        span: :meth:`keep`) recounts ``invalidated`` over the rows kept; not compared, not written.
     """
 
     source: str
@@ -133,6 +136,8 @@ class ReadReport:
     first_bad: str = ""
     notes: tuple[str, ...] = ()
     truth: bool = True
+    invalid_rows: np.ndarray | None = field(default=None, compare=False, repr=False)
+    invalid_reasons: np.ndarray | None = field(default=None, compare=False, repr=False)
 
     @property
     def n_rejected(self) -> int:
@@ -146,6 +151,24 @@ class ReadReport:
         that nothing read is lost without a count.
         """
         return self.rows_read - self.rows_kept - self.n_rejected
+
+    def keep(self, kept: np.ndarray, reason: str) -> ReadReport:
+        """The report once the rows where ``kept`` (one per row of the table) is False are removed, counted
+        as rejected for ``reason``; ``invalidated`` recounted over the rows kept (an invalidated row
+        removed counts once, as rejected), and the invalidated rows renumbered in the smaller table."""
+        kept = np.asarray(kept, dtype=bool)
+        dropped = int(kept.size - np.count_nonzero(kept))
+        if not dropped:
+            return self
+        rejected = {**self.rejected, reason: self.rejected.get(reason, 0) + dropped}
+        rows, reasons, invalidated = self.invalid_rows, self.invalid_reasons, self.invalidated
+        if rows is not None and reasons is not None:
+            stay = kept[rows]
+            rows, reasons = (np.cumsum(kept) - 1)[rows[stay]], reasons[stay]
+            names, counts = np.unique(reasons, return_counts=True)
+            invalidated = dict(zip(names.tolist(), counts.tolist(), strict=True))
+        return replace(self, rows_kept=int(np.count_nonzero(kept)), rejected=rejected,
+                       invalidated=invalidated, invalid_rows=rows, invalid_reasons=reasons)  # fmt: skip
 
     def to_dict(self) -> dict:
         return {

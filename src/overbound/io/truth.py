@@ -396,6 +396,7 @@ def apply_truth(table: pl.DataFrame, report: ReadReport, truth: Truth) -> tuple[
             f"no epoch inside the span of the truth trajectory {truth} ({span} outside it; GPS time, "
             "or UTC labelled as GPS time?)",
         )
+    report = report.keep(keep, _OUTSIDE)  # the invalidated rows among those removed recounted
     table, truth_xyz, status = table.filter(pl.Series(keep)), truth_xyz[keep], status[keep]
     east, north, up = (as_numpy(table[c]).astype(float) for c in ("east", "north", "vpe"))
     solved = np.isfinite(east) & np.isfinite(north) & np.isfinite(up)
@@ -410,14 +411,17 @@ def apply_truth(table: pl.DataFrame, report: ReadReport, truth: Truth) -> tuple[
     cols |= {c: as_numpy(table[c]) * nan for c in ("hpl", "vpl")}
     table = table.with_columns(pl.Series(k, v, dtype=pl.Float64) for k, v in cols.items())
     n_out, n_gap = int(np.count_nonzero(~keep)), int(np.count_nonzero(gap))
-    rejected = {**report.rejected, **({_OUTSIDE: n_out} if n_out else {})}
     invalidated = {**report.invalidated, **({_GAP: n_gap} if n_gap else {})}
+    rows, reasons = report.invalid_rows, report.invalid_reasons
+    if rows is not None and reasons is not None and n_gap:  # for a time window applied afterwards
+        at = np.flatnonzero(gap)
+        rows, reasons = np.concatenate([rows, at]), np.concatenate([reasons, np.full(at.size, _GAP, object)])
     note = (
         f"errors against {truth}: {n_out} epochs outside its span removed, {n_gap} epochs in its gaps "
         "(no truth) made no-solution epochs"
     )
     first_bad = report.first_bad or (f"{_GAP}: epoch {table['time'][int(np.argmax(gap))]}" if n_gap else "")
     return table, dataclasses.replace(
-        report, rows_kept=table.height, rejected=rejected, invalidated=invalidated, first_bad=first_bad,
-        notes=(*report.notes, note),
+        report, rows_kept=table.height, invalidated=invalidated, first_bad=first_bad,
+        notes=(*report.notes, note), invalid_rows=rows, invalid_reasons=reasons,
     )  # fmt: skip
