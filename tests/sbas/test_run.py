@@ -106,6 +106,10 @@ def test_cli_writes_both_tables_and_counts(tmp_path):
         (["--obs", OBS, "--nav", NAV, "--sbas", DATA / "ems" / "h00.ems.gz"], "do not overlap"),
         (["--obs", NAV, "--nav", NAV, "--sbas", *EMS], "navigation file given as --obs"),
         (["--obs", OBS, "--nav", NAV, "--sbas", FIX / "PROVENANCE.md"], "unknown format for --sbas"),
+        (
+            ["--obs", DATA.parent / "novatel" / "bestpos_raimstatus.bin.gz", "--nav", NAV, "--sbas", *EMS],
+            "convert them with RTKLIB's convbin",
+        ),  # a receiver's own binary log: the route is said
         (["--obs", OBS, "--nav", NAV, "--sbas", *EMS, "--geo", "126"], "no messages of GEO 126"),
         (["--obs", SDK], "no reference position"),
     ],

@@ -101,6 +101,11 @@ _KINDS = {
     "nav": ("rinex-nav", "ubx"),
     "sbas": ("ems", "rinex-b", "rtklib-sbs", "ubx"),
 }
+#: Said with an unknown format: the route for the raw logs of other receivers (docs/your-data.md).
+_CONVERT = (
+    " (other receivers' raw logs, e.g. Hemisphere, NovAtel, Septentrio: convert them with RTKLIB's "
+    "convbin to RINEX and an .sbs message log)"
+)
 _KIND_TEXT = {
     "rinex-obs": "a RINEX observation file",
     "rinex-nav": "a RINEX navigation file",
@@ -591,7 +596,7 @@ def _load(sources: Source | Sequence[Source], role: str):
             what = _KIND_TEXT.get(kind)
             raise InputError(
                 name, f"{what} given as {_OPTION[role]}; {_OPTION[role]} takes {_ACCEPTS[role]}" if what
-                else f"unknown format for {_OPTION[role]}: expected {_ACCEPTS[role]}",
+                else f"unknown format for {_OPTION[role]}: expected {_ACCEPTS[role]}{_CONVERT}",
             )  # fmt: skip
         yield name, kind, data
 
