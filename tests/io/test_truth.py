@@ -274,3 +274,27 @@ def test_a_dataset_ingested_against_the_mean_warns_when_analysed(tmp_path):
     assert run.exit_code == 0, run.output
     doc = json.loads((out / "summary.json").read_text())
     assert any("against the mean" in w for w in doc["warnings"])
+
+
+def test_many_gaps_each_epoch_interpolated_in_its_own_stretch():
+    """A truth with hundreds of gaps (RTK fix lost and regained), epochs shuffled: each epoch between
+    two samples of a stretch gets that stretch's interpolation, as np.interp over the stretch alone."""
+    rng = np.random.default_rng(8)
+    t = np.cumsum(np.where(rng.random(3000) < 0.1, 5.0, 1.0))  # 1 s steps, 10 % of them 5 s gaps
+    xyz = _circle(t)
+    truth = _truth(t, xyz, "linear")
+    at_us = (rng.uniform(t[0] - 3, t[-1] + 3, 4000) * US).astype(np.int64)
+    at = at_us / US
+    got, status = truth.at(at_us)
+    for i in rng.choice(at.size, 300, replace=False):
+        j = np.searchsorted(t, at[i], side="right") - 1
+        if at[i] < t[0] or at[i] > t[-1]:
+            assert status[i] == "outside_truth_span" and np.isnan(got[i]).all()
+        elif t[j] != at[i] and t[j + 1] - t[j] > 1.5:
+            assert status[i] == "no_truth_gap" and np.isnan(got[i]).all()
+        else:
+            s = np.flatnonzero(np.r_[True, np.diff(t) > 1.5]).searchsorted(j, side="right") - 1
+            first = np.flatnonzero(np.r_[True, np.diff(t) > 1.5])[s]
+            last = np.r_[np.flatnonzero(np.diff(t) > 1.5) + 1, t.size][s]
+            want = [np.interp(at[i], t[first:last], xyz[first:last, k]) for k in range(3)]
+            assert status[i] == "" and np.allclose(got[i], want, rtol=0, atol=1e-6)

@@ -41,6 +41,7 @@ from __future__ import annotations
 import dataclasses
 import datetime as dt
 import hashlib
+import itertools
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -167,12 +168,19 @@ class Truth:
         out = np.full((time_us.size, 3), np.nan)
         out[exact] = xyz[ic[exact]]
         between = ~outside & ~exact & ~gap
-        # stretches of samples without a gap: each epoch between two samples lies inside one
+        # stretches of samples without a gap (numbered 0, 1, ... in time): each epoch between two
+        # samples lies inside one; the epochs grouped by stretch, each stretch a slice of the samples
         stretch = np.concatenate([[0], np.cumsum(np.diff(t) > self.max_gap_s * _US)])
-        for k in np.unique(stretch[ic[between]]):
-            inside = np.flatnonzero(stretch == k)
-            want = between & (stretch[ic] == k)
-            out[want] = self._interpolate(t[inside], xyz[inside], time_us[want])
+        first = np.flatnonzero(np.r_[True, np.diff(stretch) != 0])
+        last = np.r_[first[1:], t.size]
+        idx = np.flatnonzero(between)
+        k_of = stretch[ic[idx]]
+        order = np.argsort(k_of, kind="stable")
+        idx, k_of = idx[order], k_of[order]
+        cuts = np.flatnonzero(np.r_[True, np.diff(k_of) != 0, True]) if idx.size else np.zeros(1, np.int64)
+        for a, b in itertools.pairwise(cuts):
+            s, e = first[k_of[a]], last[k_of[a]]
+            out[idx[a:b]] = self._interpolate(t[s:e], xyz[s:e], time_us[idx[a:b]])
         return out, status
 
     def _interpolate(self, t: np.ndarray, xyz: np.ndarray, at: np.ndarray) -> np.ndarray:
