@@ -289,6 +289,13 @@ IMPLAUSIBLE_MEDIAN_HPE_M = 50.0
 IMPLAUSIBLE_MEDIAN_VPE_M = 50.0
 
 
+#: What errors against the mean position hide (the warning of ``--reference mean``).
+_MEAN_CAVEAT = (
+    "not a surveyed position: HPE and VPE show the scatter about that mean, a constant bias of the "
+    "receiver is invisible, and the integrity results are optimistic to that extent."
+)
+
+
 def input_warnings(
     table: pl.DataFrame, reference: Reference | MeanPosition | Truth | None
 ) -> tuple[str, ...]:
@@ -300,8 +307,7 @@ def input_warnings(
     if isinstance(reference, MeanPosition):
         out.append(
             "Errors are against the mean of the receiver's own positions (of each input file, over the "
-            "whole file), not a surveyed position: HPE and VPE show the scatter about that mean, a constant "
-            "bias of the receiver is invisible, and the integrity results are optimistic to that extent."
+            f"whole file), {_MEAN_CAVEAT}"
         )
     # two columns' medians over the solved epochs, without a filtered copy of the whole table
     solved = pl.all_horizontal(pl.col("hpe", "vpe", "hpl", "vpl").is_finite())
@@ -451,9 +457,8 @@ def _campaign_basis(manifest: dict) -> tuple[tuple[str, ...], dict | None]:
     stations = manifest.get("stations", {})
     mean = sorted(name for name, e in stations.items() if e.get("reference") == "mean")
     warnings = (
-        (f"Errors of {', '.join(mean)} are against the mean of each input's own positions, not a surveyed "
-         "position: a constant bias of the receiver is invisible, and the integrity results are "
-         "optimistic to that extent.",) if mean else ()
+        (f"Errors of {', '.join(mean)} are against the mean of each input's own positions, {_MEAN_CAVEAT}",)
+        if mean else ()
     )  # fmt: skip
     truths = {name: e["truth"] for name, e in sorted(stations.items()) if e.get("truth")}
     if not truths:

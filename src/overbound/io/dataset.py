@@ -32,12 +32,16 @@ import re
 from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import polars as pl
 
 from overbound import __version__
 from overbound.io.geodesy import MeanPosition, Reference
 from overbound.io.schema import InputError, ReadReport, validate_epochs
+
+if TYPE_CHECKING:
+    from overbound.io.truth import Truth
 
 __all__ = [
     "MANIFEST",
@@ -181,7 +185,7 @@ def ingest(
     dataset: str | Path,
     sources: Sequence,
     *,
-    reference: Reference | MeanPosition | None = None,
+    reference: Reference | MeanPosition | Truth | None = None,
     read: Callable | None = None,
     **read_options,
 ) -> IngestResult:
@@ -280,8 +284,10 @@ def write_partition(
 
 
 def _record(
-    manifest: dict, reports, written, reference: Reference | MeanPosition | None, table: pl.DataFrame
+    manifest: dict, reports, written, reference: Reference | MeanPosition | Truth | None, table: pl.DataFrame
 ) -> None:
+    from overbound.io.truth import Truth  # when run: io.truth imports this module (via io.open)
+
     stations = manifest.setdefault("stations", {})
     for name in table["station"].unique().sort().to_list():
         entry = stations.setdefault(name, {"reference": None})
@@ -289,7 +295,7 @@ def _record(
             entry["reference"] = [reference.lat_deg, reference.lon_deg, reference.height_m]
         elif isinstance(reference, MeanPosition):  # each input's own mean, in its notes
             entry["reference"] = "mean"
-        elif hasattr(reference, "statement"):  # a truth trajectory (io.truth imports this module)
+        elif isinstance(reference, Truth):
             entry["reference"] = "truth"
             entry.setdefault("truth", []).append({"statement": reference.statement(), **reference.summary()})
     manifest.setdefault("inputs", []).append(

@@ -145,7 +145,7 @@ def _float(v) -> float:
     return float(v) if isinstance(v, int | float) else np.nan
 
 
-def _epochs(found: dict, reference, name: str) -> tuple[pl.DataFrame, Reference]:
+def _epochs(found: dict, reference, name: str) -> tuple[pl.DataFrame, Reference | None]:
     gfa = pl.DataFrame(
         {
             "_line": [ln for ln, _ in found["GFA"]],

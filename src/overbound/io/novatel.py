@@ -166,8 +166,12 @@ class _Place:
     def number(self, off: int) -> int:
         return off if self.newlines is None else int(np.searchsorted(self.newlines, off)) + 1
 
+    def label(self, number: int) -> str:
+        """``line N`` or ``byte N`` of a :meth:`number`."""
+        return f"byte {number}" if self.newlines is None else f"line {number}"
+
     def text(self, off: int) -> str:
-        return f"byte {off}" if self.newlines is None else f"line {self.number(off)}"
+        return self.label(self.number(off))
 
 
 def _records(data: bytes, log: RowLog, place: _Place) -> tuple[dict[str, list[dict]], Counter]:
@@ -238,8 +242,7 @@ def _unique(rows: list[dict], kind: str, log: RowLog, place: _Place) -> pl.DataF
     df = pl.DataFrame(rows, schema=_SCHEMA[kind])
     repeated = df.filter(df["_t"].is_duplicated() & ~df["_t"].is_first_distinct())
     for line in repeated["_line"]:  # a line or a byte offset (_Place.number)
-        where = f"line {line}" if place.newlines is not None else f"byte {line}"
-        log.reject(int(line), f"duplicate record: a second {kind} of the same time ({where})")
+        log.reject(int(line), f"duplicate record: a second {kind} of the same time ({place.label(line)})")
     return df.unique("_t", keep="first", maintain_order=True)
 
 

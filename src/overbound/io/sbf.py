@@ -139,7 +139,7 @@ def _pvt_row(offset: int, m) -> dict:
     }  # fmt: skip
 
 
-def _epochs(blocks: dict, reference, name: str) -> tuple[pl.DataFrame, Reference]:
+def _epochs(blocks: dict, reference, name: str) -> tuple[pl.DataFrame, Reference | None]:
     pvt = pl.DataFrame([_pvt_row(off, m) for off, m in blocks[_PVT]])
     dop = pl.DataFrame(
         [{"_t": _time_key(m), "hpl_raw": float(m.HPL), "vpl_raw": float(m.VPL)} for _, m in blocks[_DOP]],

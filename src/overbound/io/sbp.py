@@ -139,7 +139,7 @@ def _frames(data: bytes, log: RowLog) -> tuple[dict[int, list], Counter]:
     return out, other
 
 
-def _epochs(msgs: dict, reference, name: str) -> tuple[pl.DataFrame, Reference]:
+def _epochs(msgs: dict, reference, name: str) -> tuple[pl.DataFrame, Reference | None]:
     weeks = {int(m.tow): int(m.wn) for _, m in msgs[_GPS_TIME]}
     week_tows = np.array(sorted(weeks), dtype=np.int64)
     rows = []

@@ -430,6 +430,6 @@ def apply_truth(table: pl.DataFrame, report: ReadReport, truth: Truth) -> tuple[
     )
     first_bad = report.first_bad or (f"{_GAP}: epoch {table['time'][int(np.argmax(gap))]}" if n_gap else "")
     return table, dataclasses.replace(
-        report, rows_kept=table.height, invalidated=invalidated, first_bad=first_bad,
+        report, invalidated=invalidated, first_bad=first_bad,
         notes=(*report.notes, note), invalid_rows=rows, invalid_reasons=reasons,
     )  # fmt: skip

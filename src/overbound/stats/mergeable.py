@@ -187,10 +187,16 @@ def row_percentiles(x: np.ndarray, valid: np.ndarray, q: float) -> np.ndarray:
     hi = np.minimum(lo + 1, np.maximum(n - 1, 0))
     a = np.take_along_axis(s, lo[:, None], axis=1)[:, 0]
     b = np.take_along_axis(s, hi[:, None], axis=1)[:, 0]
-    d = b - a
-    out = np.where(g >= 0.5, b - d * (1.0 - g), a + d * g)
+    out = _lerp(a, b, g)
     out[n == 0] = np.nan
     return out
+
+
+def _lerp(a, b, g):
+    """numpy's ``_lerp`` of its quantiles: ``a + (b - a) g``, or ``b - (b - a)(1 - g)`` when ``g >= 0.5``
+    (the same bits as ``np.percentile``)."""
+    d = b - a
+    return np.where(g >= 0.5, b - d * (1.0 - g), a + d * g)
 
 
 def exact_percentile(n: int, q: float, below: int, values: np.ndarray, *, scale: float = 100.0) -> float:
@@ -208,5 +214,4 @@ def exact_percentile(n: int, q: float, below: int, values: np.ndarray, *, scale:
     s = np.sort(np.asarray(values, dtype=np.float64))
     a = s[k - below]
     b = s[min(k + 1, n - 1) - below]
-    d = b - a
-    return float(b - d * (1.0 - g)) if g >= 0.5 else float(a + d * g)
+    return float(_lerp(a, b, g))
