@@ -588,9 +588,12 @@ def _campaign_confidence(
 
 def _release(client) -> None:
     """The workers wait now (the driver fits, or writes the report): they give back the memory
-    their passes kept for reuse, which would otherwise add to the campaign's peak."""
+    their passes kept for reuse, which would otherwise add to the campaign's peak; and so does
+    the driver, whose merges of partials leave freed memory behind (after the counting of 10
+    station-years: 1.1 GB resident of which 0.26 GB live, measured)."""
     if client is not None:
         client.run(release_freed_memory)
+        release_freed_memory()
 
 
 def _campaign_report(dataset: Path, network: CampaignCounting) -> ReadReport:

@@ -8,8 +8,8 @@ Layout (hive partitioning, readable by polars, pyarrow, Dask and DuckDB as one t
 
 A partition holds the canonical columns of :mod:`overbound.io.schema` (``station`` included,
 so a file read alone is still a whole epoch table), sorted by time, written by
-:func:`~overbound.io.table.write_epochs` (zstd, :data:`PARTITION_COMPRESSION`; provenance of the input
-that gave it).
+:func:`~overbound.io.table.write_epochs` (an encoding per column, :data:`PARTITION_COMPRESSION`;
+provenance of the input that gave it).
 The day is the GPS day of the epochs (GPS time, like the table).
 
 The manifest (``overbound.dataset/1``) holds the overbound version, the stations with their
@@ -60,14 +60,15 @@ __all__ = [
     "write_partition",
 ]
 
-#: The partitions' Parquet codec. zstd, although LZ4 decodes a station-day's columns 2.3 times as
-#: fast (6.4 ms against 15.0 ms): the error and PL columns are float noise that no codec shrinks
-#: much, LZ4's files are 15 % larger, and a campaign reads every partition many times, so whether
-#: the dataset stays in the page cache decides. Measured (``bench/bench_campaign.py``, 24 GB
-#: machine): 2 station-years (4.3 GB), full analysis 465 s zstd, 419 s LZ4; 10 station-years
-#: (18.7 GiB zstd, 21.5 GB LZ4, which no longer fits beside the workers), counting 85 s zstd,
-#: 199 s LZ4, and the full analysis 1630 s against 1825 s.
-PARTITION_COMPRESSION = "zstd"
+#: The partitions' Parquet layout: an encoding per column (:data:`~overbound.io.table.PER_COLUMN`):
+#: the times delta-packed, the errors and PLs plain and uncompressed, the few-valued columns in
+#: dictionaries. A campaign reads every partition many times, so decoding speed counts, and so
+#: does the size, as whether the dataset stays in the page cache decides the speed too: LZ4 decodes
+#: 2.3 times as fast as zstd, but its files are 15 % larger, and the 10 station-years of
+#: ``bench/bench_campaign.py`` (18.7 GiB in zstd, 21.5 GB in LZ4) no longer fitted beside the
+#: workers (counting 85 s zstd, 199 s LZ4, measured). This layout decodes 3.3 times as fast as
+#: zstd (a station-day's times, errors and PLs: 1.96 ms against 6.56 ms) at 2 % more bytes.
+PARTITION_COMPRESSION = "per-column"  # io.table.PER_COLUMN (io.table imports this module)
 #: Why an input without truth is not written as an epoch table (ingest, convert).
 NO_TRUTH_TABLE = (
     "no truth (errors unknown): an epoch table holds errors, so it is analysed directly "
