@@ -51,7 +51,7 @@ import hashlib
 import json
 import os
 import pickle
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -455,6 +455,10 @@ class _Local:
     def share(self, value):
         return value
 
+    def imap(self, fn: Callable, items: list[tuple]) -> Iterator:
+        """``fn(*item)`` for each item, in order, each as it is done."""
+        return (fn(*item) for item in items)
+
     def starmap(self, fn: Callable, items: list[tuple]) -> list:
         """``[fn(*item) for item in items]``."""
         return [fn(*item) for item in items]
@@ -506,6 +510,15 @@ class _Dask:
     def starmap(self, fn: Callable, items: list[tuple]) -> list:
         """``[fn(*item) for item in items]``, one task per item on the workers, in order."""
         return self.client.gather([self.client.submit(fn, *item, pure=False) for item in items])
+
+    def imap(self, fn: Callable, items: list[tuple]) -> Iterator:
+        """``fn(*item)`` for each item, one task per item on the workers, submitted at once and
+        yielded in order as each is done (the driver works on one while the workers run the
+        next); each result is released from the workers once yielded."""
+        futures = [self.client.submit(fn, *item, pure=False) for item in items]
+        for i in range(len(futures)):
+            future, futures[i] = futures[i], None
+            yield future.result()
 
     def share(self, value):
         # one object, under a key of its own: a dict would be scattered value by value under its own

@@ -29,7 +29,7 @@ from overbound.campaign import (
 )
 from overbound.io.dataset import Partition
 from overbound.io.schema import REQUIRED, InputError
-from overbound.methods.confidence_level import ConfidenceAnalysis
+from overbound.methods.confidence_level import ConfidenceAnalysis, analysed_names
 from overbound.methods.confidence_partitions import (
     BandChains,
     BandPlan,
@@ -42,6 +42,7 @@ from overbound.methods.confidence_partitions import (
     band_second,
     dataset_confidence,
     day_block,
+    joined_walks,
     merge_band_first,
     merge_band_second,
 )
@@ -92,26 +93,35 @@ def _walk_task(
     days: list[list[Partition]],
     plans: dict[str, BandPlan],
     chains: dict[str, BandChains],
+    axis: str,
     forward: bool,
     window: Window,
     extra: tuple[str, ...],
 ) -> _Done:
-    """Pass 3 one way: ``days`` (the partitions of each day) in walking order, each day read once
-    for every axis, one day in memory."""
-    sweeps = {a: BandSweep(p, chains[a].chains, forward) for a, p in plans.items()}
+    """Pass 3 of ``axis`` one way: ``days`` (the partitions of each day) in walking order, each day
+    read once (the axis' columns only), one day in memory."""
+    plan = plans[axis]
+    sweep = BandSweep(plan, chains[axis].chains, forward)
+    only, extra = _axis_columns(axis, extra)
     try:
         for parts in days:
-            tables = [_read(p, _cut(p, window), REQUIRED, extra) for p in parts]
-            for a, sweep in sweeps.items():
-                sweep.day(day_block([_block(p, t, plans[a]) for p, t in zip(parts, tables, strict=True)]))
+            blocks = [_block(p, _read(p, _cut(p, window), only, extra), plan) for p in parts]
+            sweep.day(day_block(blocks))
     except _ERRORS as exc:
         return _Done(None, (_failure(parts[0], exc),))
-    return _Done({a: s.picks() for a, s in sweeps.items()}, computed=sum(map(len, days)))
+    return _Done(sweep.pieces(), computed=sum(map(len, days)))
 
 
-def _only(partial):
-    """The merge of a group of one task."""
-    return partial
+def _axis_columns(axis: str, extra: tuple[str, ...]) -> tuple[tuple[str, ...], tuple[str, ...]]:
+    """The columns of ``axis`` (``REQUIRED`` ones, then those of ``extra``) a walk reads: the time,
+    the station, the error and PL, the signed components and the alerts."""
+    error, pl_, *components = analysed_names(axis)
+    return ("time", "station", error, pl_), tuple(c for c in extra if c in (*components, "alert"))
+
+
+def _ways(days: list) -> tuple[tuple[bool, list], ...]:
+    """The days of the backward walk (last first), then of the forward."""
+    return (False, days[::-1]), (True, days)
 
 
 def campaign_confidence(
@@ -174,19 +184,24 @@ def campaign_confidence(
         by_day.setdefault(p.date, []).append(p)
     days = [by_day[d] for d in sorted(by_day)]
     shared_chains = runner.share(chains)
-    walks = [
-        [(days, shared, shared_chains, True, time_range, extra)],
-        [(days[::-1], shared, shared_chains, False, time_range, extra)],
-    ]
-    done = runner.map_reduce(_walk_task, walks, _only, _ticks(progress, "confidence pass 3", 2))
-    failures = [f for d in done for f in d.failures]
+    # a task per axis and way (4 on 2 workers: half the samples each, an axis' joined by the driver
+    # while the workers walk the next)
+    walks = [(w, shared, shared_chains, a, fw, time_range, extra) for a in plans for fw, w in _ways(days)]
+    tick = _ticks(progress, "confidence pass 3", len(walks))
+    done: dict[str, list] = {a: [] for a in plans}
+    out, failures = [], []
+    for (_, _, _, a, _, _, _), d in zip(walks, runner.imap(_walk_task, walks), strict=True):
+        if tick:
+            tick(1)
+        failures += d.failures
+        done[a].append(d.partial)
+        if len(done[a]) == 2 and not failures:  # the axis' backward and forward walks
+            both = joined_walks(*done.pop(a), a)
+            out.append(dataset_confidence(plans[a], chains[a], both, runner.starmap))
+            del both
     if failures:
         return _failed(tried, _Done(None, tuple(failures)))
-    forward, backward = (d.partial for d in done)
-    out = tuple(
-        dataset_confidence(plans[a], chains[a], forward[a], backward[a], runner.starmap) for a in plans
-    )
-    return ConfidenceRun(out, tuple(failed))
+    return ConfidenceRun(tuple(out), tuple(failed))
 
 
 def _failed(axes: Sequence[str], done: _Done) -> ConfidenceRun:

@@ -235,3 +235,34 @@ def test_the_greedy_chain_covers_at_most_two_slots_per_sample(seed: int) -> None
     n = select_spaced(t, anchor=int(rng.integers(0, t.size)), spacing=spacing).size
     slots = np.unique(t // spacing).size
     assert n >= slots / 2 - 1
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_slot_bits_merge_is_the_union_of_the_pairs_in_any_order(seed: int) -> None:
+    """Pass 2's occupied (slice, slot) pairs: bits merged by or, in any grouping and order, hold
+    exactly the set union of the pieces' pairs (slots not on multiples of 8, empty pieces)."""
+    from overbound.methods.confidence_partitions import SlotBits, merge_slot_bits
+
+    rng = np.random.default_rng(seed)
+    n_slices, n_slots = 7, 1000
+    pieces, pairs = [], set()
+    for _ in range(9):
+        n = int(rng.integers(0, 40))
+        lo = int(rng.integers(0, n_slots - 50))
+        s, slot = rng.integers(0, n_slices, n), lo + rng.integers(0, 50, n)
+        pieces.append(SlotBits.of(s, slot, n_slices))
+        pairs |= set(zip(s.tolist(), slot.tolist(), strict=True))
+    expected = np.zeros((n_slices, n_slots), dtype=bool)
+    for s, slot in pairs:
+        expected[s, slot] = True
+    order = rng.permutation(len(pieces))
+    split = int(rng.integers(1, len(pieces)))
+    grouped = merge_slot_bits(
+        merge_slot_bits(*(pieces[i] for i in order[:split])),
+        merge_slot_bits(*(pieces[i] for i in order[split:])),
+    )
+    for merged in (merge_slot_bits(*pieces), grouped):
+        assert merged.lo % 8 == 0
+        assert np.array_equal(merged.dense(n_slots), expected)
+    empty = SlotBits.of(np.empty(0, np.int64), np.empty(0, np.int64), n_slices)
+    assert not merge_slot_bits(empty, empty).dense(n_slots).any()

@@ -36,6 +36,7 @@ __all__ = [
     "ConfidenceAnalysis",
     "ConfidenceBin",
     "analysed_columns",
+    "analysed_names",
     "band_widths",
     "check_columns",
     "confidence_analysis",
@@ -469,6 +470,12 @@ def check_columns(columns: Collection[str], axis: str) -> None:
         raise InputError(
             "<epoch table>", f"the {axis} confidence analysis needs column(s) {', '.join(missing)}"
         )
+
+
+def analysed_names(axis: str) -> tuple[str, ...]:
+    """The columns the analysis of ``axis`` reads besides the time, station and alerts: the error,
+    the PL, then the signed errors it overbounds when they are not the error itself."""
+    return _COLUMNS[axis]
 
 
 def analysed_columns(

@@ -14,7 +14,8 @@ the last bit (the same samples, then the same statistics, :func:`samples_bin`):
    run of slices exactly, with no rounding at its edges).
 2. :func:`band_second` per station-day: per slice, the candidates, their largest error with its
    time and pooled row (the anchor: largest error, earliest on ties, as ``argmax`` over the
-   merged time axis), and the ``spacing`` slots they occupy (a sorted set of integers).
+   merged time axis), and the ``spacing`` slots they occupy (:class:`SlotBits`, a bit per
+   slice and slot).
    :func:`band_chains` merges them and, per target, walks the widths as the pooled analysis does
    (step 5): a width whose candidates occupy fewer than ``min_samples`` slots is skipped; a
    width whose candidates occupy at least ``2 (min_samples + 1)`` slots certainly reaches
@@ -26,7 +27,8 @@ the last bit (the same samples, then the same statistics, :func:`samples_bin`):
    of the pooled table), the next sample of every chain found by one ``searchsorted`` per slice
    of its band. :func:`dataset_confidence` chooses each target's width and computes its bin.
 
-Every partial merges by integer addition, set union or an exact comparison; no float is added.
+Every partial merges by integer addition, set union (a bitwise or) or an exact comparison; no
+float is added.
 """
 
 from __future__ import annotations
@@ -63,6 +65,7 @@ __all__ = [
     "Chain",
     "ConfidenceParameters",
     "Picks",
+    "SlotBits",
     "band_block",
     "band_chains",
     "band_first",
@@ -71,9 +74,11 @@ __all__ = [
     "concat_blocks",
     "dataset_confidence",
     "day_block",
+    "joined_walks",
     "merge_band_first",
     "merge_band_second",
     "merge_picks",
+    "merge_slot_bits",
     "table_confidence",
     "take",
     "walk",
@@ -327,13 +332,61 @@ def band_plan(first: BandFirst, axis: str, parameters: ConfidenceParameters) -> 
 class BandSecond:
     """Pass 2 merged: per slice the candidates (``count``) and the anchor candidate (largest
     ``error``, then earliest ``t``, then lowest ``row``; ``error = -inf`` for an empty slice); the
-    occupied (slice, slot) pairs as sorted codes ``slice * n_slots + slot - slot0``."""
+    occupied (slice, slot) pairs (``slots``)."""
 
     count: np.ndarray
     error: np.ndarray
     t: np.ndarray
     row: np.ndarray
-    codes: np.ndarray
+    slots: SlotBits
+
+
+@dataclass(frozen=True)
+class SlotBits:
+    """The (slice, slot) pairs occupied by candidates, as bits: row ``s`` of ``bits`` (packed, 8
+    slots a byte) holds slots ``lo, lo + 1, ...`` (counted from the plan's ``slot0``; ``lo`` a
+    multiple of 8) of slice ``s``. A station-day spans 240 slots of 360 s (12 kB for 400 slices);
+    a campaign at most the plan's ``n_slots`` (a station-year of 1 Hz data and its 12 M pairs:
+    4.3 MB, where the pairs as sorted int64 codes took 100 MB and a sort at every merge)."""
+
+    lo: int
+    bits: np.ndarray
+
+    @classmethod
+    def of(cls, s: np.ndarray, slot: np.ndarray, n_slices: int) -> SlotBits:
+        """The pairs ``(s[i], slot[i])``."""
+        if s.size == 0:
+            return cls(0, np.zeros((n_slices, 0), dtype=np.uint8))
+        lo = int(slot.min()) // 8 * 8
+        seen = np.zeros((n_slices, int(slot.max()) - lo + 1), dtype=bool)
+        seen[s, slot - lo] = True
+        return cls(lo, np.packbits(seen, axis=1))
+
+    @property
+    def hi(self) -> int:
+        """The slot after the last one held (a multiple of 8)."""
+        return self.lo + 8 * self.bits.shape[1]
+
+    def dense(self, n_slots: int) -> np.ndarray:
+        """The pairs as booleans ``[slice, slot]`` over slots ``0 .. n_slots - 1``."""
+        out = np.zeros((self.bits.shape[0], n_slots), dtype=bool)
+        if self.bits.shape[1]:
+            rows = np.unpackbits(self.bits, axis=1).view(np.bool_)
+            width = min(rows.shape[1], n_slots - self.lo)
+            out[:, self.lo : self.lo + width] = rows[:, :width]
+        return out
+
+
+def merge_slot_bits(*parts: SlotBits) -> SlotBits:
+    """The pairs of all ``parts`` (their union: a bitwise or, in any order)."""
+    held = [p for p in parts if p.bits.shape[1]]
+    if not held:
+        return parts[0]
+    lo, hi = min(p.lo for p in held), max(p.hi for p in held)
+    bits = np.zeros((held[0].bits.shape[0], (hi - lo) // 8), dtype=np.uint8)
+    for p in held:
+        bits[:, (p.lo - lo) // 8 : (p.hi - lo) // 8] |= p.bits
+    return SlotBits(lo, bits)
 
 
 def band_second(b: BandBlock, plan: BandPlan) -> BandSecond:
@@ -349,7 +402,8 @@ def band_second(b: BandBlock, plan: BandPlan) -> BandSecond:
     if s.size:
         first = _first_largest(s, err, t, row)
         best_err[s[first]], best_t[s[first]], best_row[s[first]] = err[first], t[first], row[first]
-    return BandSecond(count, best_err, best_t, best_row, _slot_codes(s, t, plan))
+    slots = SlotBits.of(s, t // plan.parameters.spacing_us - plan.slot0, n)
+    return BandSecond(count, best_err, best_t, best_row, slots)
 
 
 def _first_largest(s: np.ndarray, err: np.ndarray, t: np.ndarray, row: np.ndarray) -> np.ndarray:
@@ -366,19 +420,6 @@ def _first_largest(s: np.ndarray, err: np.ndarray, t: np.ndarray, row: np.ndarra
     return cand[order][np.r_[True, g[1:] != g[:-1]]]
 
 
-def _slot_codes(s: np.ndarray, t: np.ndarray, plan: BandPlan) -> np.ndarray:
-    """The sorted codes ``slice * n_slots + slot - slot0`` of the (slice, slot) pairs present: marked
-    in a table of the block's slots by slices (no sort of the epochs)."""
-    if s.size == 0:
-        return np.empty(0, dtype=np.int64)
-    slot = t // plan.parameters.spacing_us - plan.slot0
-    lo = int(slot.min())
-    seen = np.zeros((int(slot.max()) - lo + 1) * plan.n_slices, dtype=bool)
-    seen[(slot - lo) * plan.n_slices + s] = True
-    at = np.flatnonzero(seen)
-    return np.sort((at % plan.n_slices) * plan.n_slots + at // plan.n_slices + lo)
-
-
 def merge_band_second(*parts: BandSecond) -> BandSecond:
     """Pass-2 partials merged (in any order: the anchor is chosen by a total order)."""
     count, error, t, row = parts[0].count, parts[0].error, parts[0].t, parts[0].row
@@ -390,7 +431,7 @@ def merge_band_second(*parts: BandSecond) -> BandSecond:
             np.where(better, p.t, t),
             np.where(better, p.row, row),
         )
-    return BandSecond(count, error, t, row, np.unique(np.concatenate([p.codes for p in parts])))
+    return BandSecond(count, error, t, row, merge_slot_bits(*(p.slots for p in parts)))
 
 
 @dataclass(frozen=True)
@@ -431,7 +472,7 @@ def band_chains(plan: BandPlan, second: BandSecond) -> BandChains:
     n_t, n_w = plan.lo.shape
     cum = np.concatenate([[0], np.cumsum(second.count)])
     n_cand = cum[plan.hi] - cum[plan.lo]
-    bounds = np.searchsorted(second.codes, np.arange(plan.n_slices + 1) * plan.n_slots)
+    occupied = second.slots.dense(plan.n_slots)
     seen = np.zeros(plan.n_slots, dtype=bool)
     chains: list[Chain] = []
     for k in range(n_t):  # ~200 targets; the slices of a target's widths are marked incrementally
@@ -440,9 +481,8 @@ def band_chains(plan: BandPlan, second: BandSecond) -> BandChains:
         for j in range(n_w):
             lo, hi = int(plan.lo[k, j]), int(plan.hi[k, j])
             for s in (*range(lo, a), *range(b, hi)):
-                codes = second.codes[bounds[s] : bounds[s + 1]] - s * plan.n_slots
-                count += int(np.count_nonzero(~seen[codes]))
-                seen[codes] = True
+                count += int(np.count_nonzero(occupied[s] & ~seen))
+                seen |= occupied[s]
             a, b = lo, hi
             last = j == n_w - 1
             if count < p.min_samples and not last:
@@ -549,11 +589,10 @@ class BandSweep:
         best = np.maximum.reduceat(cand, first) if cand.size else cand
         return best >= 0, best
 
-    def picks(self) -> Picks:
-        """The samples found, in walking order (by day, then by step)."""
-        if not self._picks:
-            return _no_picks(len(_COMPONENTS[self.plan.axis]))
-        return merge_picks(*self._picks)
+    def pieces(self) -> tuple[Picks, ...]:
+        """The samples found, in walking order (by day, then by step), a piece per day with some:
+        joined once, by :func:`joined_walks` (a copy fewer of the campaign's samples)."""
+        return tuple(self._picks)
 
 
 def _no_picks(n_signed: int) -> Picks:
@@ -566,19 +605,27 @@ def merge_picks(*parts: Picks) -> Picks:
     return Picks(np.concatenate([p.chain for p in parts]), concat_blocks([p.samples for p in parts]))
 
 
+def joined_walks(backward: Sequence[Picks], forward: Sequence[Picks], axis: str) -> Picks:
+    """The pieces of both walks of ``axis`` (:meth:`BandSweep.pieces`) as one :class:`Picks`, each
+    chain's samples in time order: the backward walk reversed, then the forward (one copy, from
+    views)."""
+    r = slice(None, None, -1)
+    parts = [Picks(p.chain[r], take(p.samples, r)) for p in backward[::-1]] + list(forward)
+    return merge_picks(*parts) if parts else _no_picks(len(_COMPONENTS[axis]))
+
+
 # --- finish --------------------------------------------------------------------------------------
 
 
 def dataset_confidence(
-    plan: BandPlan, chains: BandChains, forward: Picks, backward: Picks, starmap: Callable | None = None
+    plan: BandPlan, chains: BandChains, both: Picks, starmap: Callable | None = None
 ) -> ConfidenceAnalysis:
-    """The :class:`ConfidenceAnalysis` from the walked chains: per target the first width walked
-    whose chain reaches ``min_samples``, else the last (step 5); its samples in time order (the
-    backward walk reversed, then the forward), its statistics (step 6). ``starmap(fn, items)``
-    (a campaign runner's): the rated bands' solves (:func:`solve_band`, most of step 6's time)
-    through it, the same numbers as in this process."""
+    """The :class:`ConfidenceAnalysis` from the walked chains (``both`` walks,
+    :func:`joined_walks`): per target the first width walked whose chain reaches ``min_samples``,
+    else the last (step 5); its samples in time order, its statistics (step 6).
+    ``starmap(fn, items)`` (a campaign runner's): the rated bands' solves (:func:`solve_band`, most
+    of step 6's time) through it, the same numbers as in this process."""
     p = plan.parameters
-    both = merge_picks(_reverse(backward), forward)
     order = np.argsort(both.chain, kind="stable")  # each chain's samples in time order
     bounds = np.searchsorted(both.chain[order], np.arange(len(chains.chains) + 1))
     walked: dict[tuple[int, int], np.ndarray] = {}
@@ -638,17 +685,12 @@ def _starmap(fn: Callable, items: list[tuple]) -> list:
     return [fn(*item) for item in items]
 
 
-def _reverse(p: Picks) -> Picks:
-    r = slice(None, None, -1)
-    return Picks(p.chain[r], take(p.samples, r))
-
-
-def walk(plan: BandPlan, chains: BandChains, days: Iterable[BandBlock], forward: bool) -> Picks:
+def walk(plan: BandPlan, chains: BandChains, days: Iterable[BandBlock], forward: bool) -> tuple[Picks, ...]:
     """One direction's :class:`BandSweep` over ``days`` (merged day blocks, in walking order)."""
     sweep = BandSweep(plan, chains.chains, forward)
     for b in days:
         sweep.day(b)
-    return sweep.picks()
+    return sweep.pieces()
 
 
 def table_confidence(
@@ -681,6 +723,5 @@ def table_confidence(
     for (_, d, _, _), b in zip(blocks, parts, strict=True):
         by_day.setdefault(d, []).append(b)
     days = [day_block(by_day[d]) for d in sorted(by_day)]
-    return dataset_confidence(
-        plan, chains, walk(plan, chains, days, True), walk(plan, chains, days[::-1], False), starmap
-    )
+    both = joined_walks(walk(plan, chains, days[::-1], False), walk(plan, chains, days, True), axis)
+    return dataset_confidence(plan, chains, both, starmap)
