@@ -103,12 +103,14 @@ def _walk_task(
     plan = plans[axis]
     sweep = BandSweep(plan, chains[axis].chains, forward)
     only, extra = _axis_columns(axis, extra)
-    try:
-        for parts in days:
-            blocks = [_block(p, _read(p, _cut(p, window), only, extra), plan) for p in parts]
-            sweep.day(day_block(blocks))
-    except _ERRORS as exc:
-        return _Done(None, (_failure(parts[0], exc),))
+    for parts in days:
+        blocks = []
+        for p in parts:
+            try:
+                blocks.append(_block(p, _read(p, _cut(p, window), only, extra), plan))
+            except _ERRORS as exc:  # the partition named, not its day's first
+                return _Done(None, (_failure(p, exc),))
+        sweep.day(day_block(blocks))
     return _Done(sweep.pieces(), computed=sum(map(len, days)))
 
 

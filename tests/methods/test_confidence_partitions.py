@@ -187,6 +187,39 @@ def test_horizontal_without_east_fails_as_the_pooled_table(tmp_path) -> None:
         confidence_analysis(pooled, axis="horizontal")
 
 
+def test_a_partition_unreadable_in_a_walk_fails_both_axes_naming_it(tmp_path, monkeypatch) -> None:
+    """A station-day that can no longer be read when the chains are walked (pass 3: a task per
+    axis and way, each reading its axis' columns) fails every axis, with the partition named, as
+    when it fails in pass 1 or 2."""
+    import overbound.campaign_confidence as cc
+
+    _random_network(4, stations=2, days=3).write_parquet(tmp_path / "a.parquet")
+    ingest(tmp_path / "ds", [tmp_path / "a.parquet"])
+    parts = partitions(tmp_path / "ds")
+    bad = parts[-2]  # not its day's first station
+    assert bad.station != parts[0].station
+    read, columns_read = cc._read, []
+
+    def flaky(partition, window, only, extra):
+        columns_read.append((tuple(only), tuple(extra)))
+        if partition.key == bad.key and "station" in only and len(only) == 4:  # a walk's read
+            raise OSError("gone")
+        return read(partition, window, only, extra)
+
+    monkeypatch.setattr(cc, "_read", flaky)
+    run = campaign_confidence(parts, None)
+    assert run.done == () and [a for a, _ in run.failed] == ["vertical", "horizontal"]
+    assert all(
+        why == f"partition {bad.station} {bad.date} unreadable in the confidence passes: OSError: gone"
+        for _, why in run.failed
+    )
+    walks = {c for c in columns_read if len(c[0]) == 4}
+    assert walks == {
+        (("time", "station", "vpe", "vpl"), ("alert",)),
+        (("time", "station", "hpe", "hpl"), ("east", "north", "alert")),
+    }
+
+
 def test_dataset_with_a_time_window_equals_the_pooled_table(tmp_path) -> None:
     import datetime as dt
 
