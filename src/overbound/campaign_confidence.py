@@ -15,6 +15,7 @@ from dataclasses import dataclass
 
 import polars as pl
 
+from overbound._allocator import release_freed_memory
 from overbound.campaign import (
     Window,
     _by_axis,
@@ -111,6 +112,7 @@ def _walk_task(
             except _ERRORS as exc:  # the partition named, not its day's first
                 return _Done(None, (_failure(p, exc),))
         sweep.day(day_block(blocks))
+    release_freed_memory()  # the days' arrays: the worker's next walk or pass need not find it held
     return _Done(sweep.pieces(), computed=sum(map(len, days)))
 
 

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 import polars as pl
 
+from overbound._allocator import release_freed_memory
 from overbound.campaign import (
     Window,
     _by_axis,
@@ -130,6 +131,7 @@ def _chain_task(parts: list[Partition], walks: dict[str, Walk], forward: bool, w
         out = walk_station(blocks(), walks, forward)
     except (InputError, OSError, pl.exceptions.PolarsError, ValueError) as exc:
         return _Done(None, (_failure(parts[0], exc),))
+    release_freed_memory()  # a station's arrays, walked: not held under the next task's
     return _Done(out, computed=len(parts))
 
 
