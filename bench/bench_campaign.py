@@ -19,8 +19,8 @@ PL confidence level too; and the full default analysis (the parametric analysis 
 
 Every step runs as ``overbound`` (or a child Python) in its own process tree, whose summed
 resident memory is sampled every 0.1 s: "peak MB" is the peak of all its processes together
-(client, scheduler and workers), not of one. The dataset takes about 5.3 MB per station-day
-(19 GB for 10 station-years).
+(client, scheduler and workers), not of one. The dataset takes about 5.55 MB per station-day
+(20.3 GB for 10 station-years).
 """
 
 from __future__ import annotations
