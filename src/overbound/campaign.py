@@ -483,11 +483,6 @@ class _Dask:
         """One merged :class:`_Done` per group of task arguments. The tasks and the merge trees are
         submitted at once, and only the roots are kept: each partial is released as soon as its
         group is merged, so that the workers hold a few groups of partials, never all of them."""
-        roots = self._roots(task, groups, merge, progress)
-        return [r.result() if r is not None else _Done(None) for r in roots]
-
-    def _roots(self, task, groups, merge, progress) -> list:
-        """The future of each group's merged :class:`_Done` (``None`` for an empty group)."""
         import threading
 
         lock = threading.Lock()
@@ -512,7 +507,7 @@ class _Dask:
                     for i in range(0, len(level), SPLIT_EVERY)
                 ]
             roots.append(level[0] if level else None)
-        return roots
+        return [r.result() if r is not None else _Done(None) for r in roots]
 
     def starmap(self, fn: Callable, items: list[tuple]) -> list:
         """``[fn(*item) for item in items]``, one task per item on the workers, in order."""

@@ -68,7 +68,7 @@ __all__ = [
 #: ``bench/bench_campaign.py`` (18.7 GiB in zstd, 21.5 GB in LZ4) no longer fitted beside the
 #: workers (counting 85 s zstd, 199 s LZ4, measured). This layout decodes 3.3 times as fast as
 #: zstd (a station-day's times, errors and PLs: 1.96 ms against 6.56 ms) at 2 % more bytes.
-PARTITION_COMPRESSION = "per-column"  # io.table.PER_COLUMN (io.table imports this module)
+PARTITION_COMPRESSION = "per-column"  # io.table.PER_COLUMN (io.table's imports reach this module)
 #: Why an input without truth is not written as an epoch table (ingest, convert).
 NO_TRUTH_TABLE = (
     "no truth (errors unknown): an epoch table holds errors, so it is analysed directly "
