@@ -330,3 +330,32 @@ def test_the_band_confidences_of_the_verdicts_are_computed_ahead(
 
     monkeypatch.setattr(verdict, "band_confidence", refuse)
     assert repr(verdict.assess(done)) == repr(own)
+
+
+def test_a_dataset_starts_the_figure_processes_at_its_report_a_file_at_once(
+    dataset: Path, tmp_path: Path, monkeypatch
+) -> None:
+    """The figure pool holds ~160 MB per process: a campaign's analysis (minutes, on Dask workers)
+    starts it at the report's first figure, a file's analysis while it runs (to have it warm)."""
+    import overbound.analysis
+    from overbound.io.table import write_epochs
+    from overbound.report.rendering import ENV_PROCESSES, active_renderer
+
+    monkeypatch.setenv(ENV_PROCESSES, "2")
+    started: list[bool] = []
+    run = overbound.analysis.analyze
+
+    def spy(*args, **kwargs):
+        started.append(active_renderer().started)
+        return run(*args, **kwargs)
+
+    monkeypatch.setattr(overbound.analysis, "analyze", spy)
+    table, _ = read_dataset(dataset)
+    one = tmp_path / "network.parquet"
+    write_epochs(table, one)
+    ds = _copy(dataset, tmp_path)
+    _analyze([str(ds), "-o", str(tmp_path / "dataset"), "--workers", "0", "--counting-only"])
+    _analyze([str(one), "-o", str(tmp_path / "file"), "--no-confidence", "--no-evt", "--no-parametric"])
+    assert started == [False, True]
+    report = (tmp_path / "dataset" / "report.html").read_text()
+    assert report.count("data:image/png;base64,") > 3  # the deferred pool drew the figures

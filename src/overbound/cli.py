@@ -9,7 +9,7 @@ import math
 import os
 import sys
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from importlib.resources import as_file, files
 from pathlib import Path
 
@@ -48,18 +48,29 @@ def _progress() -> Iterator[Progress]:
         yield bar
 
 
-def _draws_figures(command):
+def _draws_figures(command=None, *, defer: Callable[[dict], bool] | None = None):
     """Run ``command`` with its report figures drawn by worker processes
-    (:func:`overbound.report.rendering.parallel_figures`; ``OVERBOUND_FIGURE_PROCESSES`` sets how many)."""
+    (:func:`overbound.report.rendering.parallel_figures`; ``OVERBOUND_FIGURE_PROCESSES`` sets how many),
+    started at once unless ``defer(the command's arguments)`` says to start them at the first figure."""
 
-    @functools.wraps(command)
-    def wrapper(*args, **kwargs):
-        from overbound.report.rendering import parallel_figures
+    def decorate(command):
+        @functools.wraps(command)
+        def wrapper(*args, **kwargs):
+            from overbound.report.rendering import parallel_figures
 
-        with parallel_figures():
-            return command(*args, **kwargs)
+            with parallel_figures(start=not (defer and defer(kwargs))):
+                return command(*args, **kwargs)
 
-    return wrapper
+        return wrapper
+
+    return decorate(command) if command is not None else decorate
+
+
+def _is_campaign(kwargs: dict) -> bool:
+    """Whether ``analyze`` was given one campaign dataset: minutes of work on Dask workers that need the
+    memory the figure processes would hold idle (about 160 MB each), and whose report is a small share."""
+    inputs = kwargs.get("inputs") or ()
+    return len(inputs) == 1 and is_dataset(inputs[0])
 
 
 @contextlib.contextmanager
@@ -371,7 +382,7 @@ def _read_options(
     show_default=True,
     help="Campaign dataset: keep partial results per station-day beside the data, and reuse them.",
 )
-@_draws_figures
+@_draws_figures(defer=_is_campaign)
 def analyze(
     inputs,
     out_dir,
@@ -393,7 +404,7 @@ def analyze(
     when it is large, with partial results cached beside the data.
     """
     read_options = _read_options(**inputs_opts)
-    campaign = len(inputs) == 1 and is_dataset(inputs[0])
+    campaign = _is_campaign({"inputs": inputs})
     if (counting_only or workers is not None or scheduler) and not campaign:
         raise click.UsageError("--counting-only, --workers and --scheduler apply to a campaign dataset")
     if campaign and epochs_out:
@@ -950,7 +961,7 @@ def _read_line(r) -> str:
     help="Integrity risk per independent sample.",
 )
 @_with_input_options
-@_draws_figures
+@_draws_figures(defer=_is_campaign)
 def confidence(
     inputs, out_dir, axis, min_samples, spacing, tolerance, max_tolerance, step, max_pl, risk, **inputs_opts
 ) -> None:
@@ -1068,7 +1079,7 @@ def _auto_or_float(*, below: float | None = None, minimum: float | None = None):
 )
 @click.option("--seed", default=0, show_default=True, type=int, help="Seed of the bootstrap.")
 @_with_input_options
-@_draws_figures
+@_draws_figures(defer=_is_campaign)
 def evt(
     inputs, out_dir, axis, service, threshold, cluster_gap, decluster, n_boot, confidence, seed, **inputs_opts
 ) -> None:
@@ -1125,7 +1136,7 @@ def _decorrelation_option(ctx, param, value: str) -> str | float:
     help="One-sided confidence level of the bounds.",
 )
 @_with_input_options
-@_draws_figures
+@_draws_figures(defer=_is_campaign)
 def parametric(inputs, out_dir, services, decorrelation, confidence, **inputs_opts) -> None:
     """Parametric integrity, availability and continuity (Kannemans 2006): OUTPUT/parametric.json, .html.
 

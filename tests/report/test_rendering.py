@@ -119,3 +119,15 @@ def test_processes_from_the_environment(monkeypatch):
         default_processes()
     monkeypatch.delenv(ENV_PROCESSES)
     assert 1 <= default_processes() <= 4
+
+
+def test_deferred_pool_starts_at_the_first_figure():
+    inline = figure_html(_axes("d"), name="d", alt="d", caption="d")
+    with parallel_figures(2, start=False) as renderer:
+        assert renderer is not None and not renderer.started  # no process held while a campaign runs
+        html = figure_html(_axes("d"), name="d", alt="d", caption="d")
+        assert renderer.started and html.startswith("<overbound-figure-")
+        assert resolve_figures(html) == inline
+        assert renderer.fallbacks() == 0  # drawn by a worker of the pool started then
+    with parallel_figures(2, start=False) as renderer:
+        assert not renderer.started  # a block without figures never starts one

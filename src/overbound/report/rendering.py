@@ -88,14 +88,24 @@ def _ready() -> None:
 class FigureRenderer:
     """A pool of processes drawing pickled figures; :meth:`submit` returns a placeholder for the page."""
 
-    def __init__(self, processes: int) -> None:
-        ctx = multiprocessing.get_context("spawn")
+    def __init__(self, processes: int, *, start: bool = True) -> None:
+        self._processes = processes
         self._token = next(_RENDERERS)
         self._keys = itertools.count()
-        self._pool = ProcessPoolExecutor(max_workers=processes, mp_context=ctx, initializer=_warm)
+        self._pool: ProcessPoolExecutor | None = None
         self._jobs: dict[int, tuple[bytes, float, Future[bytes], Callable[[bytes], str]]] = {}
+        if start:
+            self.start()
+
+    def start(self) -> None:
+        """Start and warm the workers now, while the analysis runs (a no-op once started). Deferred, the
+        pool starts at the first figure: a campaign's Dask workers keep its memory until then."""
+        if self._pool is not None:
+            return
+        ctx = multiprocessing.get_context("spawn")
+        self._pool = ProcessPoolExecutor(max_workers=self._processes, mp_context=ctx, initializer=_warm)
         try:
-            for _ in range(processes):  # start and warm the workers now, while the analysis runs
+            for _ in range(self._processes):  # submitting one task per worker starts them all at once
                 self._pool.submit(_ready)
         except BaseException:
             self._pool.shutdown(wait=False, cancel_futures=True)
@@ -103,6 +113,11 @@ class FigureRenderer:
         for pid in getattr(self._pool, "_processes", None) or ():
             with contextlib.suppress(OSError, AttributeError):  # their start-up yields to the analysis
                 os.setpriority(os.PRIO_PROCESS, pid, min(os.getpriority(os.PRIO_PROCESS, pid) + _NICE, 19))
+
+    @property
+    def started(self) -> bool:
+        """Whether the worker processes exist (or were asked to start)."""
+        return self._pool is not None
 
     def submit(self, fig: Figure, *, dpi: float, wrap: Callable[[bytes], str]) -> str:
         """Queue ``fig`` for drawing; ``wrap(png)`` later makes its HTML. Returns the placeholder, or the
@@ -113,8 +128,9 @@ class FigureRenderer:
             return wrap(figure_png(fig, dpi=dpi))
         key = next(self._keys)
         try:
+            self.start()
             future = self._pool.submit(_draw, payload, dpi)
-        except (BrokenProcessPool, RuntimeError):  # the pool is gone: draw in this process at resolve
+        except (BrokenProcessPool, RuntimeError, OSError):  # no pool (gone, or not started): drawn here
             future = Future()
             future.set_exception(BrokenProcessPool("figure pool unavailable"))
         self._jobs[key] = (payload, dpi, future, wrap)
@@ -141,7 +157,8 @@ class FigureRenderer:
 
     def close(self, *, wait: bool = True) -> None:
         """Stop the workers, cancelling figures not yet resolved; ``wait=False`` returns at once."""
-        self._pool.shutdown(wait=wait, cancel_futures=True)
+        if self._pool is not None:
+            self._pool.shutdown(wait=wait, cancel_futures=True)
 
 
 def default_processes() -> int:
@@ -158,14 +175,15 @@ def default_processes() -> int:
 
 
 @contextmanager
-def parallel_figures(processes: int | None = None) -> Iterator[FigureRenderer | None]:
+def parallel_figures(processes: int | None = None, *, start: bool = True) -> Iterator[FigureRenderer | None]:
     """Draw the figures of the pages written inside this block in ``processes`` worker processes
-    (default :func:`default_processes`); with fewer than 2, draw them inline (yields ``None``)."""
+    (default :func:`default_processes`); with fewer than 2, draw them inline (yields ``None``).
+    ``start=False`` defers starting them to the first figure (:meth:`FigureRenderer.start`)."""
     n = default_processes() if processes is None else processes
     renderer = None
     if n >= 2:
         with contextlib.suppress(OSError, NotImplementedError):  # no process pool here: draw inline
-            renderer = FigureRenderer(n)
+            renderer = FigureRenderer(n, start=start)
     if renderer is None:
         yield None
         return
