@@ -406,3 +406,18 @@ def test_isotropic_model_bounds_anisotropic_error_in_the_far_tail(m_e, m_n, s_e,
     for pl in (6.0, 7.0, 8.0):
         iso = float(exceedance(pl, mean=math.hypot(m_e, m_n), sigma=sigma, axis="horizontal"))
         assert _anisotropic_exceedance(pl, m_e, m_n, s_e, s_n) <= iso * (1 + 1e-9)
+
+
+@pytest.mark.parametrize("axis", ["vertical", "horizontal"])
+def test_halley_sums_by_blocks_of_pls_equal_one_sum(axis, monkeypatch):
+    """The sums over PLs run by blocks (bounded memory for a campaign's 45 k PLs): any block size gives
+    the confidence level of one block to rounding, and one block is the plain sum bit for bit."""
+    rng = np.random.default_rng(11)
+    pls = rng.uniform(5.3, 5.5, 3000) + (0.35 if axis == "horizontal" else 0.0)
+    model = {"mean": 0.2, "sigma": 1.0, "n": pls.size, "axis": axis}
+    whole = confidence_level(pls, **model)
+    assert 0.01 < whole < 0.99  # a level the sums decide, not a saturated 0 or 1
+    monkeypatch.setattr(cf, "_PL_BLOCK", 7)  # 429 blocks, the last partial
+    assert confidence_level(pls, **model) == pytest.approx(whole, rel=1e-12, abs=1e-14)
+    monkeypatch.setattr(cf, "_PL_BLOCK", 1 << 20)
+    assert confidence_level(pls, **model) == whole
