@@ -412,8 +412,10 @@ def _bounds_task(partition: Partition, plan: SecondPlan, use_cache: bool, window
 
 
 def _by_axis(merge: Callable, *parts: dict) -> dict:
-    """Per-axis partials (``{axis: partial}``) merged axis by axis."""
-    return {a: merge(*(p[a] for p in parts)) for a in parts[0]}
+    """Per-axis partials (``{axis: partial}``) merged axis by axis, each axis taken out of ``parts``
+    as it is merged: the parts of one axis are freed before the next is merged (the driver's last
+    merge of EVT pass 2 of 10 station-years held both axes twice, 0.9 GB, otherwise)."""
+    return {a: merge(*(p.pop(a) for p in parts)) for a in list(parts[0])}
 
 
 def _map_merged(runner, groups, task, merge, progress, stage: str) -> _Done:

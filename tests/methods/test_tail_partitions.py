@@ -351,3 +351,24 @@ def test_the_station_order_does_not_depend_on_live_categoricals(network) -> None
     after = tail_analysis(table, axis="vertical", n_boot=20, rng=1)
     assert held.len() == 2
     _same(before, after)
+
+
+@pytest.mark.parametrize("axis", ["vertical", "horizontal"])
+def test_candidate_positions_index_each_series_of_the_pooled_table(network, axis: str) -> None:
+    """The candidates' positions (kept per station-day as int32 with the days' offsets) point at
+    the same epochs in the main series and in each service's, as the pooled table's own series."""
+    from overbound.methods.tail_extrapolation import analysed_series
+
+    table, ds = network
+    filters = tail_filters(axis)
+    data = campaign_tail_data(partitions(ds), {axis: filters}).data[axis]
+    t_main, si_main = analysed_series(table, axis=axis)
+    assert data.position.dtype == np.int64 and data.main.sum() > 10
+    assert np.array_equal(si_main[data.position], data.x[data.main])
+    assert np.array_equal(t_main[data.position], data.t_s[data.main])
+    names = [n for n, s in SERVICES.items() if s.alert_limit(axis) is not None]
+    assert len(data.services) == len(names) > 1
+    for name, (keep, positions, counts) in zip(names, data.services, strict=True):
+        t_s, si = analysed_series(table, axis=axis, service=name)
+        assert counts[3] == si.size and keep.sum() > 0
+        assert np.array_equal(si[positions], data.x[keep]) and np.array_equal(t_s[positions], data.t_s[keep])
