@@ -176,9 +176,12 @@ def campaign_client(workers: int | None = None, scheduler: str | None = None):
     # at half speed (measured): unset it for our workers.
     # All tasks are sent to the workers at once (worker-saturation inf): with the default queue of
     # about one task per thread, a worker waited for its next task after each (15 % slower).
+    # The workers' statistical profiler samples every thread's stack every 10 ms: off, as on a
+    # production cluster whose dashboard nobody watches.
     config = {
         "distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None,
         "distributed.scheduler.worker-saturation": float("inf"),
+        "distributed.worker.profile.enabled": False,
     }
     with dask.config.set(config):
         cluster = LocalCluster(

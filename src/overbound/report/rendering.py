@@ -17,7 +17,8 @@ until :func:`resolve_figures` swaps in the finished ``<figure>``.
 - **Off by default in the library.** Without :func:`parallel_figures` active, no pool exists and
   every figure is drawn inline (:func:`overbound.report.page.figure_html`); the CLI
   turns the pool on (``OVERBOUND_FIGURE_PROCESSES``, default: the cores available, at most 4; 0 or 1
-  draws inline).
+  draws inline), started with the command, or at the first figure for a campaign dataset
+  (``start=False``: its Dask workers need the memory more than the report needs a warm pool).
 """
 
 from __future__ import annotations
