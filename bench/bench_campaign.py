@@ -28,6 +28,7 @@ resident memory is sampled every 0.1 s: "peak MB" is the peak of all its process
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import shutil
@@ -56,21 +57,30 @@ print(json.dumps({"epochs": table.height, "read": t1 - t0, "count": t2 - t1}))
 """
 
 
-def run(cmd: list[str]) -> tuple[float, float, str]:
-    """Run ``cmd``; its wall time (s), the peak summed RSS of its process tree (MB), its stdout."""
+def run(cmd: list[str]) -> tuple[float, float, str, dict[str, float]]:
+    """Run ``cmd``; its wall time (s), the peak summed RSS of its process tree (MB), its stdout,
+    and the peaks of its processes one by one: ``driver`` (the command, with the Dask scheduler and
+    client) and ``child`` (the largest of its children: a Dask worker, or at the report a figure
+    process)."""
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     peak = [0.0]
+    each = {"driver": 0.0, "child": 0.0}
     done = threading.Event()
 
     def sample() -> None:
         root = psutil.Process(proc.pid)
         while not done.is_set():
+            total = 0.0
             try:
-                procs = [root, *root.children(recursive=True)]
-                rss = sum(p.memory_info().rss for p in procs if p.is_running())
+                for p in (root, *root.children(recursive=True)):
+                    with contextlib.suppress(psutil.Error):
+                        mb = p.memory_info().rss / 2**20
+                        total += mb
+                        name = "driver" if p.pid == root.pid else "child"
+                        each[name] = max(each[name], mb)
             except psutil.Error:
-                rss = 0
-            peak[0] = max(peak[0], rss / 2**20)
+                pass
+            peak[0] = max(peak[0], total)
             done.wait(0.1)
 
     t0 = time.perf_counter()
@@ -82,7 +92,7 @@ def run(cmd: list[str]) -> tuple[float, float, str]:
     sampler.join()
     if proc.returncode:
         raise SystemExit(f"{' '.join(cmd)} failed ({proc.returncode})")
-    return wall, peak[0], out
+    return wall, peak[0], out, each
 
 
 MODES = {
@@ -101,10 +111,14 @@ def analyze(dataset: Path, out: Path, *extra: str, mode: str = "--counting-only"
     analysis: the parametric analysis too)."""
     options = MODES[mode]
     cmd = [sys.executable, "-m", "overbound", "analyze", str(dataset), "-o", str(out), *options]
-    wall, peak, text = run([*cmd, *extra])
+    wall, peak, text, each = run([*cmd, *extra])
     for line in text.splitlines():
         if line.startswith("dataset:"):
             print(f"    {line}")
+    print(
+        f"    peak per process: driver (client and scheduler) {each['driver']:.0f} MB, largest child "
+        f"{each['child']:.0f} MB (a Dask worker; at the report, a figure process)"
+    )
     return wall, peak
 
 
@@ -123,7 +137,7 @@ def main() -> None:
 
     if not (dataset / "dataset.json").exists():
         sim = [sys.executable, "-m", "overbound", "simulate", "--stations", str(args.stations)]
-        wall, peak, _ = run([*sim, "--days", str(args.days), "--seed", "1", "-o", f"{dataset}/"])
+        wall, peak, _, _ = run([*sim, "--days", str(args.days), "--seed", "1", "-o", f"{dataset}/"])
         print(f"simulate into the dataset: {wall:8.1f} s, peak {peak:7.0f} MB (target < 2048 MB)")
     n_parts = len(list(dataset.glob("station=*/date=*/part-0.parquet")))
     size = sum(p.stat().st_size for p in dataset.glob("station=*/date=*/part-0.parquet")) / 2**30
@@ -180,7 +194,7 @@ def main() -> None:
         )
 
     station = last.parent.parent.name.removeprefix("station=")
-    wall, peak, out = run([sys.executable, "-c", ANCHOR, str(dataset), station])
+    wall, peak, out, _ = run([sys.executable, "-c", ANCHOR, str(dataset), station])
     r = json.loads(out.strip().splitlines()[-1])
     per_core = r["epochs"] / r["count"] / 1e6
     print(
