@@ -364,7 +364,8 @@ class TailSecond:
     Positions are kept within their block, as int32 (a station-day has far fewer than 2**31 epochs):
     ``block_candidates`` the epochs of each block, ``offsets`` (one row per block) the block's first
     position in the main series, then in each service's. :meth:`positions` gives them pooled (int64).
-    Half the bytes of pooled int64 positions: 10 station-years' candidates took 0.47 GB in the driver.
+    Half the bytes of pooled int64 positions, which were 314 of the 466 MiB of both axes' candidates
+    of 10 station-years in the driver (measured).
     """
 
     values: tuple[np.ndarray, ...]

@@ -55,8 +55,8 @@ _STEP_RTOL = 1e-5
 _MAXITER = 200
 #: PLs are merged into this many groups to find a starting point for the iteration.
 _SURROGATE_GROUPS = 64
-#: The Halley sums run over blocks of this many distinct PLs: 2 MiB arrays at 64 nodes, where the
-#: 45 k PLs of a campaign's band took 300 MB at once (the sums of a block are added in block order).
+#: The Halley sums run over blocks of this many distinct PLs: 2 MiB arrays at 64 nodes, where a band
+#: of 60 k PLs took 300 MB at once, measured (the sums of the blocks are added in block order).
 _PL_BLOCK = 4096
 _SQRT_2PI = math.sqrt(2.0 * math.pi)
 
