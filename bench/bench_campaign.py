@@ -211,7 +211,7 @@ def main() -> None:
     shutil.rmtree(tmp, ignore_errors=True)  # outputs, and the dataset unless --dataset kept it
 
 
-def speed_up(dataset: Path, tmp: Path, rounds: int = 2) -> dict[int, float]:
+def speed_up(dataset: Path, tmp: Path, rounds: int = 3) -> dict[int, float]:
     """The counting on 2 and on 1 worker, alternately, ``rounds`` times (this VM's timings vary by
     up to 20 % from one minute to the next): each one's best time (the least disturbed run, as
     ``timeit``), every time printed."""

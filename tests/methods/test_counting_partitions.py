@@ -193,3 +193,18 @@ def test_evidence_bounds_from_pass_two_when_its_values_hold_them():
     found = bounds_from_second(first, plan, second, draft)
     assert found is not None
     assert_same(found, counted_evidence(table, count_kpis(table, SERVICES), SERVICES))
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_many_short_partitions(seed):
+    """Partitions of 1 to a few dozen epochs cut anywhere (a window then spans several
+    partitions, the far rows of the boundary strips) give the pooled counting to the last bit."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0, 3000, 1.0)
+    table = _table(t[rng.random(t.size) > 0.1], "A", rng, alert=True)
+    cuts = np.sort(rng.choice(np.arange(1, table.height), 200, replace=False))
+    parts = [table[i:j] for i, j in zip(np.r_[0, cuts], np.r_[cuts, table.height], strict=True)]
+    merged, _ = count_partitioned([lambda p=p: p for p in parts], SERVICES)
+    pooled = count_kpis(table, SERVICES)
+    assert_same(merged, pooled)
+    assert pooled.services["LPV"].combined.continuity.n_windows > 0
