@@ -250,14 +250,19 @@ def test_methods_by_partition_on_a_real_scheduler_equal_one_file(
 
 
 def test_counting_only_on_a_real_scheduler_equals_in_process(
-    dataset: Path, tmp_path: Path, scheduler
+    dataset: Path, tmp_path: Path, scheduler, monkeypatch
 ) -> None:
     ds = _copy(dataset, tmp_path)
     local = _analyze(
         [str(ds), "-o", str(tmp_path / "local"), "--counting-only", "--workers", "0", "--no-cache"]
     )
-    remote = _analyze([str(ds), "-o", str(tmp_path / "remote"), "--counting-only", "--scheduler", scheduler])
+    # the dataset given relative to a folder that is not the workers' own: they still find it
+    monkeypatch.chdir(tmp_path)
+    remote = _analyze(["ds", "-o", str(tmp_path / "remote"), "--counting-only", "--scheduler", scheduler])
     assert _numbers(local) == _numbers(remote)
+    from overbound.report.json import _base  # how summary.json records the command line
+
+    assert _base(scheduler) == scheduler and _base("s3://bucket/x/net") == "net"  # an address stays whole
     assert local["verdicts"] == {} and local["network"]["partitions_analysed"] == 21
     html = (tmp_path / "remote" / "report.html").read_text()
     assert 'id="network"' in html and 'data-figure="heatmap-LPV"' in html and "Not assessed" in html
@@ -359,3 +364,24 @@ def test_a_dataset_starts_the_figure_processes_at_its_report_a_file_at_once(
     assert started == [False, True]
     report = (tmp_path / "dataset" / "report.html").read_text()
     assert report.count("data:image/png;base64,") > 3  # the deferred pool drew the figures
+
+
+def test_workers_and_scheduler_are_one_or_the_other(dataset: Path, tmp_path: Path, monkeypatch) -> None:
+    """--workers with --scheduler is refused; an explicit --workers wins over $DASK_SCHEDULER_ADDRESS
+    (here an address where nothing listens: using it would fail); with the variable set, a plain
+    file is analysed as ever."""
+    from click.testing import CliRunner
+
+    from overbound.cli import main
+
+    ds = _copy(dataset, tmp_path)
+    args = ["analyze", str(ds), "-o", str(tmp_path / "a"), "--counting-only", "--no-cache"]
+    res = CliRunner().invoke(main, [*args, "--workers", "0", "--scheduler", "tcp://127.0.0.1:9"])
+    assert res.exit_code == 2 and "give one" in res.output
+    monkeypatch.setenv("DASK_SCHEDULER_ADDRESS", "tcp://127.0.0.1:9")
+    doc = _analyze([*args[1:], "--workers", "0"])
+    assert doc["network"]["partitions_analysed"] == 21
+    pos = Path(__file__).parents[1] / "src" / "overbound" / "data" / "uslo-2006-361-waas.pos.gz"
+    reference = ["--reference", "35.311803,-120.661092,134.6419"]
+    plain = _analyze([str(pos), *reference, "-o", str(tmp_path / "plain"), "--no-evt", "--no-parametric"])
+    assert plain["epochs"]["total"] > 0

@@ -229,7 +229,10 @@ _input_options = [
     click.option(
         "--format", "fmt", type=click.Choice(FORMATS), help="Force the input format (default: detect)."
     ),
-    click.option("--station", help="Station name (default: from the input)."),
+    click.option(
+        "--station",
+        help="Station name where the input names none (an input's own station name wins, with a note).",
+    ),
     click.option("--strict", is_flag=True, help="Stop at the first malformed row instead of counting it."),
     click.option(
         "--start",
@@ -374,7 +377,8 @@ def _read_options(
     metavar="ADDRESS",
     envvar="DASK_SCHEDULER_ADDRESS",
     help="Campaign dataset: run on the Dask cluster at ADDRESS (e.g. tcp://host:8786; default "
-    "$DASK_SCHEDULER_ADDRESS); the dataset must be at the same path on its workers.",
+    "$DASK_SCHEDULER_ADDRESS, which --workers overrides); the dataset must be at the same absolute "
+    "path on its workers.",
 )
 @click.option(
     "--cache/--no-cache",
@@ -405,8 +409,12 @@ def analyze(
     """
     read_options = _read_options(**inputs_opts)
     campaign = _is_campaign({"inputs": inputs})
-    if (counting_only or workers is not None or scheduler) and not campaign:
+    given = _given_options(click.get_current_context())
+    if not campaign and (counting_only or given & {"--workers", "--scheduler"}):
         raise click.UsageError("--counting-only, --workers and --scheduler apply to a campaign dataset")
+    workers, scheduler = _cluster_choice(workers, scheduler) if campaign else (None, None)
+    if campaign:  # the workers open the partitions by this path: not relative to their own folder
+        inputs = (inputs[0].resolve(),)
     if campaign and epochs_out:
         raise click.UsageError(
             "--epochs writes the pooled epoch table, which a dataset's analysis does not read "
@@ -440,6 +448,18 @@ def analyze(
 _IN_PROCESS_BYTES = 64 << 20
 #: A dataset whose partials are cached but for this many partitions is counted in this process.
 _IN_PROCESS_UNCACHED = 64
+
+
+def _cluster_choice(workers: int | None, scheduler: str | None) -> tuple[int | None, str | None]:
+    """``--workers`` (local workers) or ``--scheduler`` (a running cluster), not both; an explicit
+    ``--workers`` wins over ``$DASK_SCHEDULER_ADDRESS`` (an option given beats the environment)."""
+    from click.core import ParameterSource
+
+    if workers is None or not scheduler:
+        return workers, scheduler
+    if click.get_current_context().get_parameter_source("scheduler") == ParameterSource.ENVIRONMENT:
+        return workers, None
+    raise click.UsageError("--workers starts local workers, --scheduler uses a running cluster: give one")
 
 
 @contextlib.contextmanager
@@ -859,6 +879,9 @@ def ingest(dataset, inputs, **inputs_opts) -> None:
     result = run(dataset, list(inputs), **_read_options(**inputs_opts))
     for r in result.reports:
         console.print(f"{r.source}: {_read_line(r)}", highlight=False, soft_wrap=True)
+        for note in r.notes:
+            if note.startswith("station argument"):  # the partitions are named otherwise than asked
+                console.print(f"{r.source}: {note}", highlight=False, soft_wrap=True)
     replaced = set(result.replaced)
     for p in result.written:
         note = " (replaced)" if p.key in replaced else ""
@@ -1333,7 +1356,7 @@ _mask_option = click.option(
     metavar="ADDRESS",
     envvar="DASK_SCHEDULER_ADDRESS",
     help="With --campaign: run on the Dask cluster at ADDRESS (default $DASK_SCHEDULER_ADDRESS); the "
-    "files and the dataset must be at the same paths on its workers.",
+    "files and the dataset must be at the same absolute paths on its workers.",
 )
 @_many_files(
     "--nav", "nav", "GPS broadcast ephemerides (RINEX 2/3 navigation; default: those of a UBX log in --obs)."
@@ -1443,7 +1466,7 @@ def sbas(
                 "the mode, mask, GEO and each station's reference; --all-subsets, --sp3 and --service "
                 "take one station"
             )
-        return _sbas_network(campaign_file, dataset, workers, scheduler)
+        return _sbas_network(campaign_file, dataset, *_cluster_choice(workers, scheduler))
     if given & _CAMPAIGN_ONLY:
         raise click.UsageError(f"{', '.join(sorted(given & _CAMPAIGN_ONLY))}: with --campaign only")
     if not obs or out is None:
@@ -1708,6 +1731,7 @@ def sbas_map(
         engine=SbasOptions(mode=mode, mask_deg=mask_deg, geo=geo), hourly=hourly, maritime=maritime,
     )  # fmt: skip
     inputs = [("nav", p) for p in nav] + [("sbas", p) for p in sbas_files]
+    workers, scheduler = _cluster_choice(workers, scheduler)
     with _staged(out_dir, "sbas-map") as stage:
         with _campaign_client(out_dir, workers, scheduler, lambda: True) as client, _progress() as bar:
             task = bar.add_task("reading", total=None)

@@ -136,3 +136,16 @@ def test_simulate_command_writes_a_dataset_for_a_directory(tmp_path: Path) -> No
     assert res.exit_code == 0, res.output
     assert res.output.endswith("4 station-days of 2 stations (dataset)\n")
     assert len(partitions(tmp_path / "ds")) == 4
+
+
+def test_ingest_says_when_the_input_names_another_station(tmp_path: Path) -> None:
+    """--station names a station only where the input names none: an input that names its own
+    (the .pos header's USLO) keeps it, and the terminal says so, not only the manifest."""
+    pos = Path(__file__).parents[2] / "src" / "overbound" / "data" / "uslo-2006-361-waas.pos.gz"
+    ref = "35.311803,-120.661092,134.6419"
+    res = CliRunner().invoke(
+        main, ["ingest", str(tmp_path / "ds"), str(pos), "--reference", ref, "--station", "FOO"]
+    )
+    assert res.exit_code == 0, res.output
+    assert "station argument 'FOO' ignored: the header names USLO" in res.output
+    assert [p.station for p in partitions(tmp_path / "ds")] == ["USLO"]

@@ -121,10 +121,14 @@ def provenance_dict(
 
 def _base(arg: str) -> str:
     """A command-line word with any path reduced to its base name (``/x/in.pos`` -> ``in.pos``,
-    ``--out=/x/dir`` -> ``--out=dir``)."""
+    ``--out=/x/dir`` -> ``--out=dir``, ``s3://bucket/x/net`` -> ``net``); an address without a path
+    stays whole (``tcp://host:8786``)."""
     if "=" in arg and arg.startswith("--"):
         key, value = arg.split("=", 1)
         return f"{key}={_base(value)}"
+    scheme, sep, rest = arg.partition("://")
+    if sep and scheme.isalnum() and "/" not in rest.rstrip("/"):  # an address (tcp://host:8786), no path
+        return arg
     if "/" in arg or "\\" in arg:
         return Path(arg).name or arg
     return arg
