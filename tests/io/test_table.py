@@ -96,6 +96,8 @@ def test_parquet_provenance(uslo, tmp_path: Path) -> None:
     assert json.loads(raw) == meta
     _, rep = read_parquet(path)
     assert f"written by overbound {overbound.__version__} from {USLO} (rtklib-pos)" in rep.notes
+    _, rep = read_parquet(write_epochs(table, tmp_path / "bare.parquet"))  # no source (a simulation)
+    assert f"written by overbound {overbound.__version__}" in rep.notes and "None" not in " ".join(rep.notes)
     assert read_epochs_metadata(write_epochs(table, tmp_path / "bare.parquet")) == {
         "extra": {},
         "format": None,
