@@ -412,8 +412,8 @@ def analyze(
     given = _given_options(click.get_current_context())
     if not campaign and (counting_only or given & {"--workers", "--scheduler"}):
         raise click.UsageError("--counting-only, --workers and --scheduler apply to a campaign dataset")
-    workers, scheduler = _cluster_choice(workers, scheduler) if campaign else (None, None)
     if campaign:  # the workers open the partitions by this path: not relative to their own folder
+        workers, scheduler = _cluster_choice(workers, scheduler)
         inputs = (inputs[0].resolve(),)
     if campaign and epochs_out:
         raise click.UsageError(
@@ -453,11 +453,9 @@ _IN_PROCESS_UNCACHED = 64
 def _cluster_choice(workers: int | None, scheduler: str | None) -> tuple[int | None, str | None]:
     """``--workers`` (local workers) or ``--scheduler`` (a running cluster), not both; an explicit
     ``--workers`` wins over ``$DASK_SCHEDULER_ADDRESS`` (an option given beats the environment)."""
-    from click.core import ParameterSource
-
     if workers is None or not scheduler:
         return workers, scheduler
-    if click.get_current_context().get_parameter_source("scheduler") == ParameterSource.ENVIRONMENT:
+    if "--scheduler" not in _given_options(click.get_current_context()):  # from the environment
         return workers, None
     raise click.UsageError("--workers starts local workers, --scheduler uses a running cluster: give one")
 

@@ -139,7 +139,7 @@ def read_parquet(
     notes = []
     if prov:
         version, src, fmt = prov.get("overbound_version"), prov.get("source"), prov.get("format")
-        origin = f" from {src}" + (f" ({fmt})" if fmt else "") if src else ""  # a simulation names none
+        origin = (f" from {src}" + (f" ({fmt})" if fmt else "")) if src else ""  # a simulation names none
         notes.append(f"written by overbound {version}{origin}")
     unread = [c for c in names if c not in used]
     if unread:
