@@ -23,12 +23,13 @@ from overbound.io.rinex_nav import read_rinex_nav
 from overbound.io.rinex_obs import read_rinex_obs
 from overbound.io.schema import REQUIRED
 from overbound.sbas import iono, tropo
-from overbound.sbas.corrections import earliest_within, previous_other_value
+from overbound.sbas.corrections import earliest_within, previous_other_value, times_us
 from overbound.sbas.engine import (
     IONO_MODE_KLOBUCHAR,
     REASONS,
     SbasOptions,
     _covariance_delta,
+    _GridStates,
     _in_regions,
     _service_sets,
     run_sbas,
@@ -736,3 +737,34 @@ def test_iodf3_alarm_takes_the_previous_prc_closest_to_half_the_timeout():
     assert r["rrc"] == pytest.approx((prc[c] - prc[c - 4 * sec]) / 4, abs=1e-12)
     in_seq = (iodf[c] - iodf[c - 4 * sec]) % 3 == 1
     assert in_seq and r["eps_rrc"] == 0
+
+
+def test_grid_states_of_a_chunk_are_the_latest_values_of_the_whole_day():
+    """The ionospheric grid table of a few minutes of epochs (the maps' chunks) is built from the MT 26 rows
+    that can be in force then only, and holds per epoch and IGP the row an as-of over the whole day gives:
+    the largest tag <= t, the last row among equal tags; an IGP last broadcast hours before keeps that row."""
+    frames, _ = read_ems([DATA / "network" / "egnos123_2019014.ems.gz"])
+    g = decode(frames).iono
+    tg = times_us(g["time"])
+    gkey = g["band"].to_numpy().astype(np.int64) * 201 + g["igp"].to_numpy().astype(np.int64)
+    noon = int(np.datetime64("2019-01-14T12:00:00", "us").astype(np.int64))
+    old = gkey[0]  # silenced from 06:00: its value in force at noon is hours old
+    keep = (gkey != old) | (tg < noon - 6 * 3600 * 10**6)
+    tg, gkey = tg[keep], gkey[keep]
+    before = np.flatnonzero(gkey == old)[-1]
+    inside = np.flatnonzero((tg > noon) & (tg < noon + 60 * 10**6))[0]
+    tg, gkey = np.append(tg, tg[[before, inside]]), np.append(gkey, gkey[[before, inside]])  # equal tags
+    ep_t = np.sort(np.append(noon + 7 * 10**6 * np.arange(60), tg[inside]))  # an epoch at a tag too
+    cells = _GridStates(gkey, tg, ep_t, np.zeros(ep_t.size, np.int64))
+    keys = np.unique(gkey)
+    got = cells.table[cells.state_ep][:, cells.column[keys]]
+    order = np.lexsort((np.arange(tg.size), tg, gkey))
+    for e, t in enumerate(ep_t):
+        avail = order[tg[order] <= t]
+        last = np.append(gkey[avail[1:]] != gkey[avail[:-1]], True)
+        want = np.full(keys.size, -1)
+        want[np.searchsorted(keys, gkey[avail[last]])] = avail[last]
+        np.testing.assert_array_equal(got[e], want)
+    assert got[0, np.searchsorted(keys, old)] == tg.size - 2  # the hours-old value, its later duplicate
+    assert (got == tg.size - 1).any()  # the in-chunk tie resolved to the later row
+    assert cells.table.shape[0] <= 61  # states: the chunk's, not the day's

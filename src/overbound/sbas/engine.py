@@ -1244,10 +1244,11 @@ class _GridStates:
         keys, kcol = np.unique(gkey, return_inverse=True)
         self.column = np.full(ionomod.N_IGP_KEYS, keys.size, np.int64)  # grid key -> column
         self.column[keys] = np.arange(keys.size)
-        tags, tag_i = np.unique(tg, return_inverse=True)
+        rows = _rows_in_force(kcol, tg, int(ep_t.min()), int(ep_t.max())) if ep_t.size else np.arange(0)
+        tags, tag_i = np.unique(tg[rows], return_inverse=True)
         n_avail = np.searchsorted(tags, ep_t, side="right")  # distinct tags available at each epoch
         by_tag = np.full((tags.size + 1, keys.size + 1), -1, np.int64)
-        np.maximum.at(by_tag, (tag_i + 1, kcol), np.arange(tg.size))  # largest row among equal tags
+        np.maximum.at(by_tag, (tag_i + 1, kcol[rows]), rows)  # largest row among equal tags
         # forward fill: the last tag count up to each one with a value of the IGP
         last = np.where(by_tag >= 0, np.arange(tags.size + 1)[:, None], 0)
         np.maximum.accumulate(last, axis=0, out=last)
@@ -1262,6 +1263,18 @@ class _GridStates:
     def cell(self, state: np.ndarray, key: np.ndarray) -> np.ndarray:
         """Flat index into ``table`` of (state per row, grid keys (rows, k))."""
         return state[:, None] * self.width + self.column[key]
+
+
+def _rows_in_force(kcol: np.ndarray, tg: np.ndarray, t0: int, t1: int) -> np.ndarray:
+    """The rows of the grid values that can be the latest of their IGP at a time in [t0, t1], increasing:
+    those tagged in (t0, t1] and, per IGP, the last of the latest tagged at or before t0 (the row that
+    the table of :class:`_GridStates` keeps among equal tags). The table of a chunk of a few minutes
+    then spans its own tags, not the whole day's (the same entries: the others are never the latest)."""
+    old = np.flatnonzero(tg <= t0)
+    order = old[np.lexsort((old, tg[old], kcol[old]))]  # by IGP, then tag, then row
+    last = np.ones(order.size, bool)
+    last[:-1] = kcol[order[1:]] != kcol[order[:-1]]
+    return np.sort(np.concatenate([order[last], np.flatnonzero((tg > t0) & (tg <= t1))]))
 
 
 def _largest_age_us(timeout: float, flight: float) -> int:
