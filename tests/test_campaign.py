@@ -260,9 +260,10 @@ def test_counting_only_on_a_real_scheduler_equals_in_process(
     monkeypatch.chdir(tmp_path)
     remote = _analyze(["ds", "-o", str(tmp_path / "remote"), "--counting-only", "--scheduler", scheduler])
     assert _numbers(local) == _numbers(remote)
-    from overbound.report.json import _base  # how summary.json records the command line
+    from overbound.report.provenance import base_word  # how summary.json records the command line
 
-    assert _base(scheduler) == scheduler and _base("s3://bucket/x/net") == "net"  # an address stays whole
+    assert base_word(scheduler) == scheduler  # an address stays whole
+    assert base_word("s3://bucket/x/net") == "net"
     assert local["verdicts"] == {} and local["network"]["partitions_analysed"] == 21
     html = (tmp_path / "remote" / "report.html").read_text()
     assert 'id="network"' in html and 'data-figure="heatmap-LPV"' in html and "Not assessed" in html

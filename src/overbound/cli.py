@@ -1475,7 +1475,7 @@ def sbas(
     from overbound.services import resolve_services
 
     if all_subsets or sp3:  # imported only when asked for: the Stanford counts pull in scipy (0.3-1 s)
-        from overbound.sbas.products import range_product, subsets_product, write_range, write_subsets
+        from overbound.report.sbas_products import range_product, subsets_product, write_range, write_subsets
     if services and not all_subsets:
         raise click.UsageError("--service sets the --all-subsets counts: give --all-subsets too")
     levels = resolve_services(list(services)) if services else None  # a bad name fails before the engine

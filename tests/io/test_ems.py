@@ -13,8 +13,8 @@ import pytest
 
 from overbound.io.ems import read_ems
 from overbound.io.gpstime import PLAUSIBLE_END, PLAUSIBLE_SPAN
+from overbound.io.sbas_frames import SbasFrames
 from overbound.io.schema import InputError
-from overbound.sbas.frames import SbasFrames
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "sbas"
 EMS = DATA / "ems"

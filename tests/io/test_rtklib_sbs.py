@@ -14,9 +14,9 @@ from click.testing import CliRunner
 
 from overbound.cli import main
 from overbound.io.rtklib_sbs import read_rtklib_sbs
+from overbound.io.sbas_crc import crc24q, crc_ok
 from overbound.io.schema import InputError
 from overbound.io.ubx_raw import read_ubx_raw
-from overbound.sbas.crc import crc24q, crc_ok
 from overbound.sbas.run import _kind
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "rtklib-sbs"

@@ -19,8 +19,8 @@ import pytest
 
 from overbound.io.ems import read_ems
 from overbound.io.gpstime import leap_seconds
-from overbound.sbas.crc import crc_ok, parity_of_data
-from overbound.sbas.frames import SbasFrames
+from overbound.io.sbas_crc import crc_ok, parity_of_data
+from overbound.io.sbas_frames import SbasFrames
 from overbound.sbas.igp import BAND_SIZES, band_igps
 from overbound.sbas.messages import AI, SIGMA2_GIVE, SIGMA2_UDRE, decode
 

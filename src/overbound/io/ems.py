@@ -22,7 +22,7 @@ the 0.12 s GEO signal flight time to it when it applies a message, and writes ta
 Parsing is vectorised: all files are joined into one ``uint8`` array, lines are gathered into
 a fixed-width matrix and every column is checked at once (digits, blanks); the hex digits of
 all lines are decoded by one ``bytes.fromhex`` call (a 256-entry table finds the bad lines when
-that fails). The CRC-24Q of every message is checked on the way (:mod:`overbound.sbas.crc`).
+that fails). The CRC-24Q of every message is checked on the way (:mod:`overbound.io.sbas_crc`).
 The 24 hourly files of a day (73,335 messages) read in about 0.1 s.
 
 A line that does not fit the layout is rejected and counted with its file and line number, and so
@@ -45,10 +45,10 @@ import polars as pl
 
 from overbound.io.gpstime import PLAUSIBLE_SPAN, plausible_us
 from overbound.io.open import Source, read_bytes, source_name
+from overbound.io.sbas_bits import FRAME_BYTES, message_type
+from overbound.io.sbas_crc import crc_ok
+from overbound.io.sbas_frames import REJECTED_SCHEMA, SbasFrames
 from overbound.io.schema import InputError, ReadReport
-from overbound.sbas.bits import FRAME_BYTES, message_type
-from overbound.sbas.crc import crc_ok
-from overbound.sbas.frames import REJECTED_SCHEMA, SbasFrames
 
 __all__ = ["EMS_LAYOUT", "read_ems"]
 

@@ -55,10 +55,10 @@ import numpy as np
 from overbound.io.ems import _HEX, _frames_in_time_order, _gather, _join, _Lines, _report
 from overbound.io.gpstime import PLAUSIBLE_SPAN, plausible_us
 from overbound.io.open import Source, read_bytes, source_name
+from overbound.io.sbas_bits import FRAME_BYTES, message_type
+from overbound.io.sbas_crc import crc_ok
+from overbound.io.sbas_frames import SbasFrames
 from overbound.io.schema import InputError, ReadReport
-from overbound.sbas.bits import FRAME_BYTES, message_type
-from overbound.sbas.crc import crc_ok
-from overbound.sbas.frames import SbasFrames
 
 __all__ = ["RINEX_B_LAYOUT", "read_rinex_b"]
 

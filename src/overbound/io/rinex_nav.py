@@ -62,8 +62,8 @@ from overbound.io._rinex import (
 )
 from overbound.io.gpstime import PLAUSIBLE_END_US, PLAUSIBLE_SPAN, PLAUSIBLE_YEARS, plausible_us
 from overbound.io.open import Source, source_name
+from overbound.io.sbas_frames import REJECTED_SCHEMA
 from overbound.io.schema import InputError, ReadReport
-from overbound.sbas.frames import REJECTED_SCHEMA
 
 __all__ = [
     "FIELDS",

@@ -102,8 +102,8 @@ from overbound.io._rinex import (
 )
 from overbound.io.gpstime import PLAUSIBLE_SPAN, plausible_us
 from overbound.io.open import Source, source_name
+from overbound.io.sbas_frames import REJECTED_SCHEMA
 from overbound.io.schema import InputError, ReadReport
-from overbound.sbas.frames import REJECTED_SCHEMA
 
 __all__ = ["RINEX2_CODES", "ObsHeader", "RinexObs", "read_rinex_obs"]
 

@@ -15,7 +15,7 @@ files are read by :func:`overbound.io.ems.read_ems`.
 
 CRC
 ---
-:class:`~overbound.sbas.frames.SbasFrames` holds the 250 bits of each message with their CRC-24Q
+:class:`~overbound.io.sbas_frames.SbasFrames` holds the 250 bits of each message with their CRC-24Q
 (DO-229D A.4.3.3). A ``.sbs`` line has no CRC, so none can be checked here: the reader appends
 the CRC-24Q computed from the 226 bits (``crc_ok`` is then True for every message) and relies on
 the check made before the line was written. RTKLIB writes a u-blox RXM-SFRB message only when
@@ -43,7 +43,7 @@ true of the three RTKLIB decoders above (``tests/io/test_rtklib_sbs.py`` checks 
 
 Parsing is vectorised: all files are joined into one buffer, split into lines and matched by
 one regular expression in polars; the hex digits of all good lines are decoded by one
-``bytes.fromhex`` call and the CRCs by :func:`overbound.sbas.crc.parity_of_data`.
+``bytes.fromhex`` call and the CRCs by :func:`overbound.io.sbas_crc.parity_of_data`.
 
 Rejections are counted per line with file and line number (``frames.rejected``): ``layout`` (not
 ``week tow prn type : hex``), ``message_length`` (not 58 hex digits, e.g. a cut line),
@@ -66,10 +66,10 @@ from overbound.io._rinex import GPS_EPOCH_US, US
 from overbound.io.ems import _frames_in_time_order, _join, _lines, _report
 from overbound.io.gpstime import PLAUSIBLE_SPAN, plausible_us
 from overbound.io.open import Source, read_bytes, source_name
+from overbound.io.sbas_bits import FRAME_BYTES, message_type
+from overbound.io.sbas_crc import parity_of_data
+from overbound.io.sbas_frames import SbasFrames
 from overbound.io.schema import InputError, ReadReport
-from overbound.sbas.bits import FRAME_BYTES, message_type
-from overbound.sbas.crc import parity_of_data
-from overbound.sbas.frames import SbasFrames
 
 __all__ = ["RTKLIB_SBS_LAYOUT", "SBS_LINE", "read_rtklib_sbs"]
 

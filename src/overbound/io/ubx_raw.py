@@ -17,7 +17,7 @@ Frames are decoded by :mod:`pyubx2` (``UBXReader.parse``, which checks the check
 finds them, counts what cannot be read and turns the messages into the tables the engine takes:
 the RINEX observation table of :mod:`overbound.io.rinex_obs` (``time``, ``sat``, ``system``,
 ``prn``, ``flag``, ``C1C``, ``L1C``, ``D1C``, ``S1C``), the ephemeris table of
-:mod:`overbound.io.rinex_nav` and :class:`~overbound.sbas.frames.SbasFrames`.
+:mod:`overbound.io.rinex_nav` and :class:`~overbound.io.sbas_frames.SbasFrames`.
 
 Input
 -----
@@ -69,10 +69,10 @@ from pyubx2 import UBXReader
 from overbound.io._rinex import GPS_EPOCH_US, US
 from overbound.io.gpstime import PLAUSIBLE_END_US, PLAUSIBLE_SPAN, PLAUSIBLE_START_US
 from overbound.io.open import Source, read_bytes, source_name
+from overbound.io.sbas_bits import FRAME_BYTES
+from overbound.io.sbas_crc import crc_ok
+from overbound.io.sbas_frames import REJECTED_SCHEMA, SbasFrames, empty_frames
 from overbound.io.schema import InputError, ReadReport
-from overbound.sbas.bits import FRAME_BYTES
-from overbound.sbas.crc import crc_ok
-from overbound.sbas.frames import REJECTED_SCHEMA, SbasFrames, empty_frames
 
 __all__ = ["UbxRaw", "is_ubx", "read_ubx_raw"]
 

@@ -22,7 +22,6 @@ anywhere, nor anything that depends on the cache or the workers.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 from pathlib import Path
 
 import polars as pl
@@ -31,6 +30,7 @@ from overbound import __version__
 from overbound.analysis import Analysis, verdicts
 from overbound.jsontext import dumps, to_jsonable
 from overbound.methods.counting import AXES, AxisKPI, ContinuityResult, CountingResult, ServiceKPI
+from overbound.report.provenance import base_names, file_digest, provenance_dict
 from overbound.verdict import KINDS, Assessment, ServiceVerdicts, assess
 
 __all__ = [
@@ -92,61 +92,6 @@ def verdicts_dict(services: dict[str, ServiceVerdicts]) -> dict:
     """``{SERVICE: {availability, continuity, accuracy, integrity, pl_bounding, overall}}``, each
     ``{verdict, requirement, basis, sentence, evidence: [...]}`` (:mod:`overbound.verdict`)."""
     return {name: {k: to_jsonable(sv.get(k)) for k in (*KINDS, "overall")} for name, sv in services.items()}
-
-
-def file_digest(path: str | Path) -> dict:
-    """``{name, size, sha256}`` of an input file: its base name only (the same JSON from any folder)."""
-    path = Path(path)
-    h = hashlib.sha256()
-    with path.open("rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return {"name": path.name, "size": path.stat().st_size, "sha256": h.hexdigest()}
-
-
-def provenance_dict(
-    inputs: list[str | Path] | tuple = (), command: list[str] | None = None, options: dict | None = None
-) -> dict:
-    """The ``provenance`` object: overbound version, the command line (paths reduced to their base
-    names), the options (as JSON values, paths as base names, times in ISO 8601, other objects as
-    their text) and each input file's base name, size and SHA-256."""
-    files = [file_digest(p) for p in inputs if isinstance(p, str | Path) and Path(p).is_file()]
-    return {
-        "overbound_version": __version__,
-        "command": None if command is None else [_base(a) for a in command],
-        "options": {k: _base_value(v) for k, v in (options or {}).items()},
-        "inputs": files,
-    }
-
-
-def _base(arg: str) -> str:
-    """A command-line word with any path reduced to its base name (``/x/in.pos`` -> ``in.pos``,
-    ``--out=/x/dir`` -> ``--out=dir``, ``s3://bucket/x/net`` -> ``net``); an address without a path
-    stays whole (``tcp://host:8786``)."""
-    if "=" in arg and arg.startswith("--"):
-        key, value = arg.split("=", 1)
-        return f"{key}={_base(value)}"
-    scheme, sep, rest = arg.partition("://")
-    if sep and scheme.isalnum() and "/" not in rest.rstrip("/"):  # an address (tcp://host:8786), no path
-        return arg
-    if "/" in arg or "\\" in arg:
-        return Path(arg).name or arg
-    return arg
-
-
-def _base_value(v):
-    """An option value as JSON: paths as base names, times in ISO 8601, other objects as their text."""
-    if isinstance(v, Path):
-        return v.name
-    if isinstance(v, str):
-        return _base(v)
-    if isinstance(v, list | tuple):
-        return [_base_value(x) for x in v]
-    if isinstance(v, dict):
-        return {str(k): _base_value(x) for k, x in v.items()}
-    if isinstance(v, bool | int | float) or v is None:
-        return v
-    return v.isoformat() if hasattr(v, "isoformat") else str(v)
 
 
 def summary_dict(
@@ -262,11 +207,6 @@ def network_dict(analysis: Analysis) -> dict:
             for (station,), rows in daily.group_by("station", maintain_order=True)
         },
     }
-
-
-def base_names(source: str) -> str:
-    """A source text (``a/b.pos, c/d.pos``) with every path reduced to its base name."""
-    return ", ".join(Path(p.strip()).name or p.strip() for p in str(source).split(","))
 
 
 def _input_dict(report) -> dict:

@@ -18,9 +18,9 @@ from matplotlib.collections import PolyCollection
 from matplotlib.colors import BoundaryNorm, ListedColormap, LogNorm
 
 from overbound.report.figures import new_figure, style
-from overbound.report.json import file_digest, provenance_dict
 from overbound.report.network import land_rings
 from overbound.report.page import escape, figure_html, row_table, section_html, write_page
+from overbound.report.provenance import file_digest, provenance_dict
 from overbound.sbas_map import ServiceMap
 
 __all__ = ["AVAILABILITY_CLASSES", "map_dict", "plot_map", "write_map"]

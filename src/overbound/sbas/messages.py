@@ -1,10 +1,10 @@
 """Decoding of L1 SBAS messages (RTCA DO-229D appendix A) into per-type polars tables.
 
-:func:`decode` takes the frames of any reader (:class:`~overbound.sbas.frames.SbasFrames`),
+:func:`decode` takes the frames of any reader (:class:`~overbound.io.sbas_frames.SbasFrames`),
 drops those whose CRC-24Q fails (counted), and decodes every message type a DO-229 user
 engine needs: MT 0, 1, 2-5, 6, 7, 9, 10, 12, 17, 18, 24, 25, 26, 27 and 28. Other types (8, 62
 internal test, 63 null, ...) are counted as not decoded. The work is vectorised by type: all
-messages of one type are decoded at once with :func:`overbound.sbas.bits.field`.
+messages of one type are decoded at once with :func:`overbound.io.sbas_bits.field`.
 
 Output model
 ------------
@@ -56,9 +56,9 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 import polars as pl
 
-from overbound.sbas.bits import bit_array
-from overbound.sbas.bits import field as bitfield
-from overbound.sbas.frames import SbasFrames
+from overbound.io.sbas_bits import bit_array
+from overbound.io.sbas_bits import field as bitfield
+from overbound.io.sbas_frames import SbasFrames
 from overbound.sbas.igp import BAND_SIZES, N_BANDS, band_igps
 
 __all__ = [

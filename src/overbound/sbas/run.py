@@ -68,11 +68,11 @@ from overbound.io.rinex_nav import (
 )
 from overbound.io.rinex_obs import read_rinex_obs
 from overbound.io.rtklib_sbs import SBS_LINE, read_rtklib_sbs
+from overbound.io.sbas_frames import SbasFrames
 from overbound.io.schema import InputError, ReadReport
 from overbound.io.table import write_epochs
 from overbound.io.ubx_raw import is_ubx, read_ubx_raw
 from overbound.sbas.engine import SbasOptions, SbasResult, run_sbas
-from overbound.sbas.frames import SbasFrames
 from overbound.sbas.messages import decode
 
 __all__ = [

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import polars as pl
 
-from overbound.sbas.bits import FRAME_BYTES, message_type, preamble
+from overbound.io.sbas_bits import FRAME_BYTES, message_type, preamble
 
 __all__ = ["PREAMBLES", "REJECTED_SCHEMA", "SbasFrames", "empty_frames"]
 

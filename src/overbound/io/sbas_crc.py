@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from overbound.sbas.bits import field
+from overbound.io.sbas_bits import field
 
 __all__ = ["POLY", "crc24q", "crc_ok", "parity", "parity_of_data"]
 

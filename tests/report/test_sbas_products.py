@@ -1,4 +1,5 @@
-"""``overbound sbas --all-subsets / --sp3``: the products of overbound.sbas.products against direct calls."""
+"""``overbound sbas --all-subsets / --sp3``: the products of overbound.report.sbas_products against direct
+calls."""
 
 from __future__ import annotations
 
@@ -15,13 +16,13 @@ from overbound.cli import main
 from overbound.io.rinex_nav import read_rinex_nav
 from overbound.io.sp3 import read_sp3
 from overbound.io.table import read_epochs_metadata
-from overbound.sbas.engine import SbasOptions
-from overbound.sbas.products import (
+from overbound.report.sbas_products import (
     SUBSETS_SCHEMA,
     range_product,
     subsets_dict,
     subsets_product,
 )
+from overbound.sbas.engine import SbasOptions
 from overbound.sbas.range_domain import RANGE_COLUMNS, range_errors
 from overbound.sbas.run import SbasRun, process
 from overbound.sbas.subsets import all_subsets

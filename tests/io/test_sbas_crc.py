@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from overbound.io.ems import read_ems
-from overbound.sbas.bits import field
-from overbound.sbas.crc import POLY, crc24q, crc_ok, parity, parity_of_data
+from overbound.io.sbas_bits import field
+from overbound.io.sbas_crc import POLY, crc24q, crc_ok, parity, parity_of_data
 
 EMS = Path(__file__).resolve().parents[1] / "data" / "sbas" / "ems"
 
