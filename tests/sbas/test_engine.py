@@ -239,6 +239,15 @@ def test_grid_interpolation_reproduces_a_plane():
     assert (sel.fail[~ok] == iono.FAIL_OUTSIDE).all()  # one unusable corner and outside: no fall-back
 
 
+def test_corner_codes_are_the_bits_of_the_corners():
+    """Every pattern of four corners (and a non-contiguous view of them) gives its 4-bit number."""
+    corners = (np.arange(16)[:, None] >> np.arange(4) & 1).astype(bool)
+    np.testing.assert_array_equal(iono._code(corners), np.arange(16))
+    wide = np.zeros((16, 8), bool)
+    wide[:, ::2] = corners
+    np.testing.assert_array_equal(iono._code(wide[:, ::2]), np.arange(16))
+
+
 def test_grid_selection_follows_do229_a44102():
     lat, lon = np.array([43.0]), np.array([1.0])  # cell 40-45 N, 0-5 E; x = 0.2, y = 0.6
     # all four in the mask, NE corner (45, 5) not monitored: the pierce point is outside the triangle

@@ -1090,7 +1090,8 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
     pos_key = ionomod.igp_key(mk_pos["lat"].to_numpy(), mk_pos["lon"].to_numpy())
     member = np.unique(_mask_code(mk_pos["band"].to_numpy(), mk_pos["iodi"].to_numpy(), pos_key))
     bands = np.unique(band_key)
-    ep_t, ep = ctx.epochs_us - flight_us, ctx.epoch  # the same t_avail for every row of an epoch
+    ep_t, ep = _distinct_times(ctx.epochs_us - flight_us, ctx.epoch)  # the same t_avail for every row of
+    # an epoch (and of every point at that time: the mask and the grid values depend on the time only)
     # IODI per (band, epoch), -2 where no MT 18 of the band; a last row of -2 for bands not in the mask
     iodi_ep = np.full((bands.size + 1, ep_t.size), -2, np.int64)
     mk_sort = packed_order(band_key, tmk, ctx.base)  # one sort for the look-ups of every band
@@ -1171,6 +1172,17 @@ def _iono(ctx: _Context, m: SbasMessages, geom: dict, lat: float, lon: float, de
     return {"ok": ok, "mode": mode, "fail": fail, "slant": slant, "sigma2_uire": s2uire, "fpp": fpp,
             "mask_timeout": mask_to,
             "ipp_lat": lat_pp, "ipp_lon": lon_pp}  # fmt: skip
+
+
+def _distinct_times(ep_t: np.ndarray, epoch: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The distinct times of the sorted epoch times ``ep_t`` and each row's index into them (``epoch``: each
+    row's epoch): with many points an epoch is a (time, point) pair, and per-time tables are P times
+    smaller."""
+    new = np.ones(ep_t.size, bool)
+    new[1:] = ep_t[1:] != ep_t[:-1]
+    if new.all():
+        return ep_t, epoch
+    return ep_t[new], (np.cumsum(new) - 1)[epoch]
 
 
 def _grid_sums(t: np.ndarray, rows: np.ndarray, w: np.ndarray, r: np.ndarray, g: pl.DataFrame,

