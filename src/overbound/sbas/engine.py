@@ -415,11 +415,8 @@ def _satellite_rows(ctx: _Context) -> tuple[_Context, np.ndarray]:
     key = (ctx.t - ctx.t.min()) * 256 + ctx.prn
     first, rows = np.unique(key, return_index=True, return_inverse=True)[1:]
     t, prn = ctx.t[first], ctx.prn[first]
-    new_epoch = np.ones(t.size, bool)
-    new_epoch[1:] = t[1:] != t[:-1]
-    sat = _Context(t=t, prn=prn, opt=ctx.opt, base=ctx.base, epoch=np.cumsum(new_epoch) - 1,
-                   epochs_us=t[new_epoch])  # fmt: skip
-    return sat, rows
+    epochs_us, epoch = _distinct_times(t, np.arange(t.size))
+    return _Context(t=t, prn=prn, opt=ctx.opt, base=ctx.base, epoch=epoch, epochs_us=epochs_us), rows
 
 
 def _gather(value, rows: np.ndarray):
